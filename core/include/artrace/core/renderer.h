@@ -1,0 +1,51 @@
+// Image-space parallelism: 8x8 tiles handed out dynamically to all worker threads (oneTBB with
+// grain 1, so an idle thread steals the next tile), and a first eye-light shading.
+#pragma once
+
+#include "artrace/core/camera.h"
+#include "artrace/core/kd_tree.h"
+
+#include <functional>
+#include <vector>
+
+namespace artrace::core {
+
+inline constexpr int kTileSize = 8;
+
+/// Linear RGB image, row-major, top row first.
+struct Image {
+  int width = 0;
+  int height = 0;
+  std::vector<glm::vec3> pixels;
+
+  Image() = default;
+  Image(int w, int h) : width(w), height(h), pixels(static_cast<size_t>(w) * h, glm::vec3(0.0f)) {}
+  glm::vec3& at(int x, int y) { return pixels[static_cast<size_t>(y) * width + x]; }
+  const glm::vec3& at(int x, int y) const { return pixels[static_cast<size_t>(y) * width + x]; }
+};
+
+struct Tile {
+  int x0, y0, x1, y1;  ///< pixel range [x0, x1) x [y0, y1)
+};
+
+/// Calls `fn` once for every 8x8 tile of a width x height image, on `threads` workers (0 = all
+/// cores). Tiles are independent, so the result does not depend on the thread count.
+void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn);
+
+/// The 8 rays of the 4x2 pixel block at (x, y) with packet lane i = (x + i % 4, y + i / 4); lanes
+/// outside the image are left out of the returned mask.
+LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays);
+
+struct RenderOptions {
+  int threads = 0;      ///< 0 = all cores
+  bool packets = true;  ///< trace 4x2 packets (else single rays)
+};
+
+/// Eye-light shading: brightness |cos| between the view ray and the surface, tinted by the
+/// normal's direction, so geometry can be looked at before materials exist. Background black.
+Image render_eye_light(const KdTree& tree, const Camera& cam, const RenderOptions& opt = {});
+
+/// Colour of an eye-light hit (shared by the packet and single-ray paths).
+glm::vec3 eye_light(const Triangle& tri, const glm::vec3& dir);
+
+}  // namespace artrace::core

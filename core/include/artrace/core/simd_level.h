@@ -1,0 +1,22 @@
+// Run-time choice of the SIMD width used by packet traversal.
+#pragma once
+
+#include <string>
+
+namespace artrace::core {
+
+/// Which packet kernels run. `kAuto` picks AVX2 (8 wide) when the CPU has it, else SSE (4 wide).
+enum class SimdLevel { kAuto, kScalar, kSse, kAvx2 };
+
+/// True when this CPU can run `level` (kScalar, kSse and kAuto always can).
+bool simd_level_supported(SimdLevel level);
+/// Selects the kernels for every following packet call; throws std::invalid_argument when the CPU
+/// lacks the instructions. Not to be called while other threads trace.
+void set_simd_level(SimdLevel level);
+/// The level in force (never kAuto: the resolved one).
+SimdLevel simd_level();
+std::string to_string(SimdLevel level);
+/// Parses "auto", "scalar", "sse", "avx2"; throws std::invalid_argument otherwise.
+SimdLevel parse_simd_level(const std::string& name);
+
+}  // namespace artrace::core

@@ -1,0 +1,342 @@
+// SAH kd-tree construction in O(N log N) after Wald & Havran 2006 (see kd_tree.h).
+#include "artrace/core/kd_tree.h"
+
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_invoke.h>
+#include <tbb/parallel_sort.h>
+#include <tbb/task_group.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace artrace::core {
+namespace {
+
+enum EventType : uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
+
+/// A triangle's clipped extent entering (start), leaving (end) or lying in (planar) a plane.
+/// Sorted by position, then type (end < planar < start, as the sweep needs), then triangle.
+struct Event {
+  float pos;
+  uint32_t tri;
+  uint32_t type;
+};
+
+inline bool operator<(const Event& a, const Event& b) {
+  if (a.pos != b.pos) return a.pos < b.pos;
+  if (a.type != b.type) return a.type < b.type;
+  return a.tri < b.tri;
+}
+
+using EventList = std::vector<Event>;
+
+enum Side : uint8_t { kBoth = 0, kLeftOnly = 1, kRightOnly = 2 };
+
+struct Split {
+  int axis = -1;
+  float pos = 0.0f;
+  bool planar_left = false;
+  float cost = kInfinity;
+};
+
+struct Subtree {
+  std::vector<KdNode> nodes;
+  std::vector<uint32_t> prims;
+};
+
+void add_events(EventList ev[3], const Aabb& box, uint32_t tri) {
+  for (int a = 0; a < 3; ++a) {
+    if (box.lo[a] == box.hi[a]) {
+      ev[a].push_back({box.lo[a], tri, kPlanar});
+    } else {
+      ev[a].push_back({box.lo[a], tri, kStart});
+      ev[a].push_back({box.hi[a], tri, kEnd});
+    }
+  }
+}
+
+/// Sutherland-Hodgman: keeps the part of polygon `in` (n vertices) on one side of a plane.
+int clip_polygon(const glm::vec3* in, int n, glm::vec3* out, int axis, float plane, bool keep_below) {
+  int m = 0;
+  for (int i = 0; i < n; ++i) {
+    const glm::vec3& cur = in[i];
+    const glm::vec3& nxt = in[(i + 1) % n];
+    const bool cur_in = keep_below ? cur[axis] <= plane : cur[axis] >= plane;
+    const bool nxt_in = keep_below ? nxt[axis] <= plane : nxt[axis] >= plane;
+    if (cur_in) out[m++] = cur;
+    if (cur_in != nxt_in) {
+      const float s = (plane - cur[axis]) / (nxt[axis] - cur[axis]);
+      glm::vec3 p = cur + s * (nxt - cur);
+      p[axis] = plane;
+      out[m++] = p;
+    }
+  }
+  return m;
+}
+
+Aabb intersect_boxes(const Aabb& a, const Aabb& b) {
+  Aabb r;
+  r.lo = glm::max(a.lo, b.lo);
+  r.hi = glm::min(a.hi, b.hi);
+  return r;
+}
+
+/// Bounds of the part of `tri` inside `voxel` ("perfect split" clipping). Falls back to the
+/// conservative box intersection when rounding clips everything away.
+Aabb clipped_bounds(const Triangle& tri, const Aabb& voxel) {
+  glm::vec3 buf_a[16] = {tri.v0, tri.v1, tri.v2};
+  glm::vec3 buf_b[16];
+  glm::vec3* in = buf_a;
+  glm::vec3* out = buf_b;
+  int n = 3;
+  for (int a = 0; a < 3 && n > 0; ++a) {
+    n = clip_polygon(in, n, out, a, voxel.lo[a], false);
+    std::swap(in, out);
+    if (n == 0) break;
+    n = clip_polygon(in, n, out, a, voxel.hi[a], true);
+    std::swap(in, out);
+  }
+  Aabb box;
+  for (int i = 0; i < n; ++i) box.extend(in[i]);
+  box = intersect_boxes(box, voxel);
+  if (box.empty()) box = intersect_boxes(Aabb::of(tri), voxel);
+  return box;
+}
+
+class Builder {
+ public:
+  Builder(const std::vector<Triangle>& tris, const KdTreeBuildOptions& opt, int max_depth)
+      : tris_(tris), opt_(opt), max_depth_(max_depth),
+        sides_([n = tris.size()] { return std::vector<uint8_t>(n, kBoth); }) {}
+
+  /// Builds the subtree of the node stored at `out.nodes[index]`. Consumes `ev`.
+  void build(Subtree& out, uint32_t index, const Aabb& voxel, EventList ev[3], uint32_t n, int depth) {
+    const Split split = n == 0 ? Split{} : find_split(voxel, ev, n);
+    if (split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) ||
+        depth >= max_depth_) {
+      make_leaf(out, index, ev[0]);
+      return;
+    }
+    EventList left[3], right[3];
+    uint32_t n_left = 0, n_right = 0;
+    distribute(voxel, split, ev, left, right, n_left, n_right);
+    for (int a = 0; a < 3; ++a) EventList().swap(ev[a]);
+
+    Aabb voxel_left = voxel, voxel_right = voxel;
+    voxel_left.hi[split.axis] = split.pos;
+    voxel_right.lo[split.axis] = split.pos;
+
+    if (n >= opt_.parallel_threshold) {
+      Subtree sub_left, sub_right;
+      sub_left.nodes.resize(1);
+      sub_right.nodes.resize(1);
+      tbb::task_group tasks;
+      tasks.run([&] { build(sub_left, 0, voxel_left, left, n_left, depth + 1); });
+      build(sub_right, 0, voxel_right, right, n_right, depth + 1);
+      tasks.wait();
+      const uint32_t child = static_cast<uint32_t>(out.nodes.size());
+      out.nodes.resize(child + 2);
+      out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+      splice(out, child, sub_left);
+      splice(out, child + 1, sub_right);
+    } else {
+      const uint32_t child = static_cast<uint32_t>(out.nodes.size());
+      out.nodes.resize(child + 2);
+      out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+      build(out, child, voxel_left, left, n_left, depth + 1);
+      build(out, child + 1, voxel_right, right, n_right, depth + 1);
+    }
+  }
+
+ private:
+  float sah(float p_left, float p_right, uint32_t n_left, uint32_t n_right) const {
+    const float lambda = (n_left == 0 || n_right == 0) ? opt_.empty_bonus : 1.0f;
+    return lambda * (opt_.traversal_cost +
+                     opt_.intersection_cost * (p_left * static_cast<float>(n_left) +
+                                               p_right * static_cast<float>(n_right)));
+  }
+
+  /// The sweep of Wald & Havran, section 4.2, over each axis' sorted events.
+  Split find_split(const Aabb& voxel, const EventList ev[3], uint32_t n) const {
+    Split best;
+    const float area = voxel.surface_area();
+    if (!(area > 0.0f)) return best;
+    const float inv_area = 1.0f / area;
+    const glm::vec3 e = voxel.extent();
+    for (int k = 0; k < 3; ++k) {
+      const float lo = voxel.lo[k], hi = voxel.hi[k];
+      if (!(lo < hi)) continue;
+      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
+      const float cap = ea * eb, ring = ea + eb;
+      uint32_t n_left = 0, n_right = n;
+      const EventList& list = ev[k];
+      size_t i = 0;
+      while (i < list.size()) {
+        const float p = list[i].pos;
+        uint32_t ending = 0, planar = 0, starting = 0;
+        while (i < list.size() && list[i].pos == p && list[i].type == kEnd) ++ending, ++i;
+        while (i < list.size() && list[i].pos == p && list[i].type == kPlanar) ++planar, ++i;
+        while (i < list.size() && list[i].pos == p && list[i].type == kStart) ++starting, ++i;
+        n_right -= planar + ending;
+        if (p > lo && p < hi) {
+          const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
+          const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
+          const float cost_pl = sah(p_left, p_right, n_left + planar, n_right);
+          const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
+          const bool planar_left = cost_pl <= cost_pr;
+          const float cost = planar_left ? cost_pl : cost_pr;
+          if (cost < best.cost) best = Split{k, p, planar_left, cost};
+        }
+        n_left += starting + planar;
+      }
+    }
+    return best;
+  }
+
+  /// Classifies triangles against the split and builds both children's sorted event lists:
+  /// one-sided triangles keep their events, straddling ones are clipped to each child and their
+  /// new events sorted and merged in (section 4.3).
+  void distribute(const Aabb& voxel, const Split& split, const EventList ev[3], EventList left[3],
+                  EventList right[3], uint32_t& n_left, uint32_t& n_right) {
+    std::vector<uint8_t>& side = sides_.local();
+    const EventList& list = ev[split.axis];
+    for (const Event& e : list) {
+      if (e.type != kEnd) side[e.tri] = kBoth;
+    }
+    for (const Event& e : list) {
+      if (e.type == kEnd && e.pos <= split.pos) {
+        side[e.tri] = kLeftOnly;
+      } else if (e.type == kStart && e.pos >= split.pos) {
+        side[e.tri] = kRightOnly;
+      } else if (e.type == kPlanar) {
+        const bool to_left = e.pos < split.pos || (e.pos == split.pos && split.planar_left);
+        side[e.tri] = to_left ? kLeftOnly : kRightOnly;
+      }
+    }
+    std::vector<uint32_t> straddling;
+    for (const Event& e : list) {
+      if (e.type == kEnd) continue;
+      switch (side[e.tri]) {
+        case kLeftOnly: ++n_left; break;
+        case kRightOnly: ++n_right; break;
+        default: straddling.push_back(e.tri); break;
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      left[a].reserve(ev[a].size());
+      right[a].reserve(ev[a].size());
+      for (const Event& e : ev[a]) {
+        const uint8_t s = side[e.tri];
+        if (s == kLeftOnly) left[a].push_back(e);
+        else if (s == kRightOnly) right[a].push_back(e);
+      }
+    }
+    if (straddling.empty()) return;
+
+    Aabb voxel_left = voxel, voxel_right = voxel;
+    voxel_left.hi[split.axis] = split.pos;
+    voxel_right.lo[split.axis] = split.pos;
+    EventList new_left[3], new_right[3];
+    for (const uint32_t t : straddling) {
+      const Aabb bl = clipped_bounds(tris_[t], voxel_left);
+      const Aabb br = clipped_bounds(tris_[t], voxel_right);
+      if (!bl.empty()) {
+        add_events(new_left, bl, t);
+        ++n_left;
+      }
+      if (!br.empty()) {
+        add_events(new_right, br, t);
+        ++n_right;
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      merge_into(left[a], new_left[a]);
+      merge_into(right[a], new_right[a]);
+    }
+  }
+
+  static void merge_into(EventList& list, EventList& extra) {
+    if (extra.empty()) return;
+    std::sort(extra.begin(), extra.end());
+    const size_t mid = list.size();
+    list.insert(list.end(), extra.begin(), extra.end());
+    std::inplace_merge(list.begin(), list.begin() + static_cast<std::ptrdiff_t>(mid), list.end());
+  }
+
+  static void make_leaf(Subtree& out, uint32_t index, const EventList& axis0) {
+    const uint32_t offset = static_cast<uint32_t>(out.prims.size());
+    for (const Event& e : axis0) {
+      if (e.type != kEnd) out.prims.push_back(e.tri);
+    }
+    std::sort(out.prims.begin() + offset, out.prims.end());
+    out.nodes[index] = KdNode::make_leaf(offset, static_cast<uint32_t>(out.prims.size()) - offset);
+  }
+
+  /// Appends a subtree built on its own: its root goes to `slot`, the rest after the current end.
+  static void splice(Subtree& out, uint32_t slot, const Subtree& sub) {
+    const uint32_t base = static_cast<uint32_t>(out.nodes.size()) - 1u;  // sub index i -> base + i
+    const uint32_t prim_base = static_cast<uint32_t>(out.prims.size());
+    auto relocate = [&](KdNode n) {
+      return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + prim_base, n.prim_count())
+                         : KdNode::make_inner(n.axis(), n.split, n.left_child() + base);
+    };
+    out.nodes[slot] = relocate(sub.nodes[0]);
+    out.nodes.reserve(out.nodes.size() + sub.nodes.size() - 1);
+    for (size_t i = 1; i < sub.nodes.size(); ++i) out.nodes.push_back(relocate(sub.nodes[i]));
+    out.prims.insert(out.prims.end(), sub.prims.begin(), sub.prims.end());
+  }
+
+  const std::vector<Triangle>& tris_;
+  const KdTreeBuildOptions& opt_;
+  const int max_depth_;
+  tbb::enumerable_thread_specific<std::vector<uint8_t>> sides_;
+};
+
+bool finite(const Triangle& t) {
+  return std::isfinite(t.v0.x) && std::isfinite(t.v0.y) && std::isfinite(t.v0.z) &&
+         std::isfinite(t.v1.x) && std::isfinite(t.v1.y) && std::isfinite(t.v1.z) &&
+         std::isfinite(t.v2.x) && std::isfinite(t.v2.y) && std::isfinite(t.v2.z);
+}
+
+}  // namespace
+
+KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris_(std::move(tris)) {
+  if (tris_.size() >= (1u << 30)) throw std::length_error("kd-tree: at most 2^30 triangles");
+  const uint32_t count = static_cast<uint32_t>(tris_.size());
+
+  // Triangles with non-finite coordinates can never be hit (the watertight test rejects them);
+  // they are left out so that the sort below sees only ordered positions.
+  EventList ev[3];
+  for (auto& list : ev) list.reserve(2 * static_cast<size_t>(count));
+  uint32_t n = 0;
+  for (uint32_t i = 0; i < count; ++i) {
+    if (!finite(tris_[i])) continue;
+    const Aabb box = Aabb::of(tris_[i]);
+    bounds_.extend(box);
+    add_events(ev, box, i);
+    ++n;
+  }
+  tbb::parallel_invoke([&] { tbb::parallel_sort(ev[0].begin(), ev[0].end()); },
+                       [&] { tbb::parallel_sort(ev[1].begin(), ev[1].end()); },
+                       [&] { tbb::parallel_sort(ev[2].begin(), ev[2].end()); });
+
+  int max_depth = opt.max_depth;
+  if (max_depth <= 0) {
+    max_depth = static_cast<int>(8.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
+  }
+  max_depth = std::min(max_depth, 60);
+
+  Subtree tree;
+  tree.nodes.resize(1);
+  if (n == 0) {
+    tree.nodes[0] = KdNode::make_leaf(0, 0);
+  } else {
+    Builder builder(tris_, opt, max_depth);
+    builder.build(tree, 0, bounds_, ev, n, 0);
+  }
+  nodes_ = std::move(tree.nodes);
+  prim_refs_ = std::move(tree.prims);
+}
+
+}  // namespace artrace::core

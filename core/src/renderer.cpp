@@ -1,0 +1,80 @@
+#include "artrace/core/renderer.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+namespace artrace::core {
+
+void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn) {
+  const int tiles_x = (width + kTileSize - 1) / kTileSize;
+  const int tiles_y = (height + kTileSize - 1) / kTileSize;
+  const int count = tiles_x * tiles_y;
+  auto body = [&](const tbb::blocked_range<int>& r) {
+    for (int i = r.begin(); i != r.end(); ++i) {
+      const int tx = i % tiles_x, ty = i / tiles_x;
+      const Tile t{tx * kTileSize, ty * kTileSize, std::min(width, (tx + 1) * kTileSize),
+                   std::min(height, (ty + 1) * kTileSize)};
+      fn(t);
+    }
+  };
+  tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, count, 1), body, tbb::simple_partitioner());
+  });
+}
+
+LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays) {
+  LaneMask mask = 0;
+  for (int i = 0; i < kPacketSize; ++i) {
+    const int px = x + i % 4, py = y + i / 4;
+    const bool inside = px < cam.width && py < cam.height;
+    rays.set(i, cam.ray(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f));
+    if (inside) mask |= 1u << i;
+  }
+  return mask;
+}
+
+glm::vec3 eye_light(const Triangle& tri, const glm::vec3& dir) {
+  glm::vec3 n = tri.geometric_normal();
+  const float len = glm::length(n);
+  if (!(len > 0.0f)) return glm::vec3(0.5f);
+  n /= len;
+  const float c = std::fabs(glm::dot(n, dir)) / glm::length(dir);
+  if (glm::dot(n, dir) > 0.0f) n = -n;
+  const glm::vec3 tint = glm::vec3(0.6f) + 0.4f * n;
+  return tint * (0.15f + 0.85f * c);
+}
+
+Image render_eye_light(const KdTree& tree, const Camera& cam, const RenderOptions& opt) {
+  Image img(cam.width, cam.height);
+  const auto& tris = tree.triangles();
+  for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
+    if (opt.packets) {
+      RayPacket rays;
+      HitPacket hits;
+      for (int y = t.y0; y < t.y1; y += 2) {
+        for (int x = t.x0; x < t.x1; x += 4) {
+          const LaneMask mask = primary_packet(cam, x, y, rays);
+          tree.intersect(rays, mask, hits);
+          for (int i = 0; i < kPacketSize; ++i) {
+            if (!((mask >> i) & 1u) || hits.prim[i] == kInvalidId) continue;
+            img.at(x + i % 4, y + i / 4) = eye_light(tris[hits.prim[i]], rays.get(i).dir);
+          }
+        }
+      }
+    } else {
+      for (int y = t.y0; y < t.y1; ++y) {
+        for (int x = t.x0; x < t.x1; ++x) {
+          const Ray r = cam.ray(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f);
+          const Hit h = tree.intersect(r);
+          if (h.valid()) img.at(x, y) = eye_light(tris[h.prim], r.dir);
+        }
+      }
+    }
+  });
+  return img;
+}
+
+}  // namespace artrace::core

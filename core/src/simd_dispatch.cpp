@@ -1,0 +1,73 @@
+#include "artrace/core/simd_level.h"
+#include "kernels.h"
+
+#include <stdexcept>
+
+namespace artrace::core {
+namespace {
+
+bool cpu_has_avx2() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
+
+SimdLevel resolve(SimdLevel level) {
+  if (level == SimdLevel::kAuto) return cpu_has_avx2() ? SimdLevel::kAvx2 : SimdLevel::kSse;
+  return level;
+}
+
+PacketKernels kernels_for(SimdLevel level) {
+  switch (level) {
+    case SimdLevel::kAvx2:
+      return {&avx2::intersect_packet, &avx2::occluded_packet};
+    case SimdLevel::kSse:
+      return {&sse::intersect_packet, &sse::occluded_packet};
+    default:
+      return {&sse::intersect_packet_scalar, &sse::occluded_packet_scalar};
+  }
+}
+
+SimdLevel g_level = resolve(SimdLevel::kAuto);
+PacketKernels g_kernels = kernels_for(g_level);
+
+}  // namespace
+
+bool simd_level_supported(SimdLevel level) {
+  return level != SimdLevel::kAvx2 || cpu_has_avx2();
+}
+
+void set_simd_level(SimdLevel level) {
+  if (!simd_level_supported(level)) {
+    throw std::invalid_argument("this CPU has no AVX2: choose 'sse' or 'scalar'");
+  }
+  g_level = resolve(level);
+  g_kernels = kernels_for(g_level);
+}
+
+SimdLevel simd_level() { return g_level; }
+
+const PacketKernels& packet_kernels() { return g_kernels; }
+
+std::string to_string(SimdLevel level) {
+  switch (level) {
+    case SimdLevel::kAuto: return "auto";
+    case SimdLevel::kScalar: return "scalar";
+    case SimdLevel::kSse: return "sse";
+    case SimdLevel::kAvx2: return "avx2";
+  }
+  return "?";
+}
+
+SimdLevel parse_simd_level(const std::string& name) {
+  if (name == "auto") return SimdLevel::kAuto;
+  if (name == "scalar") return SimdLevel::kScalar;
+  if (name == "sse") return SimdLevel::kSse;
+  if (name == "avx2") return SimdLevel::kAvx2;
+  throw std::invalid_argument("unknown SIMD level '" + name + "' (expected auto, scalar, sse or avx2)");
+}
+
+}  // namespace artrace::core

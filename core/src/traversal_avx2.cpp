@@ -1,0 +1,24 @@
+// 8-wide kernels. This file alone is compiled with -mavx2 -mfma (FMA contraction stays off, so
+// its hits match the other widths bit for bit); it is reached only through simd_dispatch.cpp after
+// the CPU reported AVX2.
+#include "kernels.h"
+
+#include <cmath>
+#include <cstring>
+#include <type_traits>
+#include <utility>
+#include <immintrin.h>
+
+namespace artrace::core::avx2 {
+#include "simd.inc"
+#include "traversal.inc"
+
+void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (mask) trace_lanes<8, false>(tree, rays, 0, mask, &hits);
+}
+
+LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
+  return mask ? trace_lanes<8, true>(tree, rays, 0, mask, nullptr) : 0u;
+}
+
+}  // namespace artrace::core::avx2

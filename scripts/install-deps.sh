@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Installs everything artrace needs to build and test, from Debian's packages only.
+# Run as root on Debian 12 (bookworm) or newer.
+set -euo pipefail
+export DEBIAN_FRONTEND=noninteractive
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libglm-dev libtbb-dev libcli11-dev nlohmann-json3-dev
+  libeigen3-dev libopencv-dev libopenni2-dev libtinygltf-dev
+  libgtest-dev libgmock-dev
+  libembree-dev
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
