@@ -1,0 +1,22 @@
+// artrace: ray traces virtual objects into recorded RGBD video. One program, many subcommands.
+#include "commands.h"
+
+#include "artrace/io/parse_error.h"
+
+#include <iostream>
+
+int main(int argc, char** argv) {
+  CLI::App app{"artrace: real-time ray tracing of virtual objects into RGBD recordings"};
+  app.require_subcommand(1);
+  artrace::tools::add_render_command(app);
+  artrace::tools::add_bench_core_command(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::exception& e) {
+    std::cerr << "artrace: error: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

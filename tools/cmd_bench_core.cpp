@@ -1,0 +1,340 @@
+// artrace bench-core: kd-tree build and ray throughput on one frame of a scene, verified first
+// (kd-tree against brute force, packets against single rays), then timed as the median of N runs
+// after a warm-up; optionally the same rays through Embree in the same run.
+#include "commands.h"
+#include "embree_reference.h"
+
+#include "artrace/core/simd_level.h"
+#include "artrace/io/aff_scene.h"
+
+#include <nlohmann/json.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <random>
+
+namespace artrace::tools {
+namespace {
+
+using core::HitPacket;
+using core::kPacketSize;
+using core::LaneMask;
+using core::RayPacket;
+using Clock = std::chrono::steady_clock;
+
+/// A batch of packets in tile order: packets [8 i, 8 i + 8) are the 4x2 blocks of tile i.
+struct Workload {
+  std::vector<RayPacket> packets;
+  std::vector<LaneMask> masks;
+  size_t rays = 0;
+  size_t tiles() const { return (packets.size() + 7) / 8; }
+};
+
+void count_rays(Workload& w) {
+  w.rays = 0;
+  for (const LaneMask m : w.masks) w.rays += static_cast<size_t>(__builtin_popcount(m));
+}
+
+Workload primary_rays(const core::Camera& cam) {
+  Workload w;
+  const int tiles_x = (cam.width + 7) / 8, tiles_y = (cam.height + 7) / 8;
+  for (int ty = 0; ty < tiles_y; ++ty) {
+    for (int tx = 0; tx < tiles_x; ++tx) {
+      for (int by = 0; by < 4; ++by) {
+        for (int bx = 0; bx < 2; ++bx) {
+          RayPacket p;
+          const int x = tx * 8 + bx * 4, y = ty * 8 + by * 2;
+          LaneMask m = 0;
+          if (x < cam.width && y < cam.height) m = core::primary_packet(cam, x, y, p);
+          w.packets.push_back(p);
+          w.masks.push_back(m);
+        }
+      }
+    }
+  }
+  count_rays(w);
+  return w;
+}
+
+template <class Fn>
+void parallel_tiles(tbb::task_arena& arena, size_t tiles, const Fn& fn) {
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tiles, 1),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i != r.end(); ++i) fn(i);
+                      },
+                      tbb::simple_partitioner());
+  });
+}
+
+/// Median of `runs` timings in ms after one warm-up call.
+template <class Fn>
+double median_ms(int runs, const Fn& fn) {
+  fn();
+  std::vector<double> ms;
+  for (int r = 0; r < runs; ++r) {
+    const auto t0 = Clock::now();
+    fn();
+    ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms[ms.size() / 2];
+}
+
+/// Secondary workloads built from the primary hits: shadow packets towards each light (the lanes
+/// of one 4x2 block share the light), and one cosine-distributed bounce per hit (fixed seed).
+void secondary_rays(const core::KdTree& tree, const Workload& primary, const std::vector<HitPacket>& hits,
+                    const std::vector<glm::vec3>& lights, Workload& shadow, Workload& bounce) {
+  std::mt19937 rng(12345);
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  for (size_t p = 0; p < primary.packets.size(); ++p) {
+    RayPacket bounce_packet;
+    LaneMask bounce_mask = 0;
+    std::vector<RayPacket> to_light(lights.size());
+    LaneMask hit_mask = 0;
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (!((primary.masks[p] >> i) & 1u) || hits[p].prim[i] == core::kInvalidId) continue;
+      hit_mask |= 1u << i;
+      const core::Ray r = primary.packets[p].get(i);
+      const glm::vec3 x = r.org + hits[p].t[i] * r.dir;
+      glm::vec3 n = glm::normalize(tree.triangles()[hits[p].prim[i]].geometric_normal());
+      if (glm::dot(n, r.dir) > 0.0f) n = -n;
+      const glm::vec3 o = x + n * (1e-4f * std::max(1.0f, glm::length(x)));
+      for (size_t l = 0; l < lights.size(); ++l) to_light[l].set(i, core::Ray{o, lights[l] - o, 0.0f, 1.0f});
+      // cosine-distributed direction about n
+      const float u1 = uni(rng), u2 = uni(rng);
+      const float rad = std::sqrt(u1), phi = 6.2831853f * u2;
+      const glm::vec3 a = std::fabs(n.x) > 0.5f ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0);
+      const glm::vec3 t = glm::normalize(glm::cross(n, a)), b = glm::cross(n, t);
+      const glm::vec3 d = rad * std::cos(phi) * t + rad * std::sin(phi) * b + std::sqrt(1.0f - u1) * n;
+      bounce_packet.set(i, core::Ray{o, d});
+      bounce_mask |= 1u << i;
+    }
+    for (size_t l = 0; l < lights.size(); ++l) {
+      shadow.packets.push_back(to_light[l]);
+      shadow.masks.push_back(hit_mask);
+    }
+    bounce.packets.push_back(bounce_packet);
+    bounce.masks.push_back(bounce_mask);
+  }
+  count_rays(shadow);
+  count_rays(bounce);
+}
+
+/// Subdivides every triangle into 4 (midpoints), `levels` times: the build-scaling meshes.
+std::vector<core::Triangle> subdivide(std::vector<core::Triangle> tris, int levels) {
+  for (int l = 0; l < levels; ++l) {
+    std::vector<core::Triangle> out;
+    out.reserve(tris.size() * 4);
+    for (const auto& t : tris) {
+      const glm::vec3 a = 0.5f * (t.v0 + t.v1), b = 0.5f * (t.v1 + t.v2), c = 0.5f * (t.v2 + t.v0);
+      out.push_back({t.v0, a, c});
+      out.push_back({a, t.v1, b});
+      out.push_back({c, b, t.v2});
+      out.push_back({a, b, c});
+    }
+    tris = std::move(out);
+  }
+  return tris;
+}
+
+struct Options {
+  std::string scene, json, reference = "none", simd = "auto";
+  double time = 0.0;
+  int width = 512, height = 400, threads = 0, runs = 7, subdivide = 0, verify_rays = 1000;
+};
+
+void run(const Options& opt) {
+  core::set_simd_level(core::parse_simd_level(opt.simd));
+  const int threads = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
+  tbb::task_arena arena(threads);
+  const io::AffScene scene = io::load_aff(opt.scene);
+  const std::vector<core::Triangle> tris = subdivide(scene.triangles_at(opt.time), opt.subdivide);
+  const core::Camera cam = scene.camera_at(opt.time, opt.width, opt.height);
+  std::vector<glm::vec3> lights;
+  for (const auto& l : scene.lights) lights.push_back(l.position);
+
+  nlohmann::json out;
+  out["scene"] = opt.scene;
+  out["time"] = opt.time;
+  out["width"] = opt.width;
+  out["height"] = opt.height;
+  out["threads"] = threads;
+  out["runs"] = opt.runs;
+  out["simd"] = core::to_string(core::simd_level());
+  out["subdivide"] = opt.subdivide;
+  out["triangles"] = tris.size();
+
+  core::KdTree tree;
+  const double build_ms = median_ms(opt.runs, [&] { arena.execute([&] { tree = core::KdTree(tris); }); });
+  const core::KdTreeStats st = tree.stats();
+  out["kdtree"] = {{"build_ms", build_ms}, {"nodes", st.nodes}, {"node_bytes", st.node_bytes},
+                   {"leaves", st.leaves}, {"empty_leaves", st.empty_leaves}, {"prim_refs", st.prim_refs},
+                   {"max_depth", st.max_depth}, {"sah_cost", st.sah_cost},
+                   {"build_ns_per_triangle", build_ms * 1e6 / std::max<size_t>(1, tris.size())}};
+
+  Workload primary = primary_rays(cam);
+  std::vector<HitPacket> hits(primary.packets.size());
+  for (size_t p = 0; p < primary.packets.size(); ++p) tree.intersect(primary.packets[p], primary.masks[p], hits[p]);
+
+  // Verify before timing: packets equal single rays on every primary ray; a sample of rays agrees
+  // with brute force.
+  size_t packet_mismatch = 0, brute_mismatch = 0, brute_checked = 0;
+  for (size_t p = 0; p < primary.packets.size(); ++p) {
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (!((primary.masks[p] >> i) & 1u)) continue;
+      const core::Hit h = tree.intersect(primary.packets[p].get(i));
+      if (h.prim != hits[p].prim[i] || (h.valid() && h.t != hits[p].t[i])) ++packet_mismatch;
+    }
+  }
+  std::mt19937 rng(7);
+  for (int k = 0; k < opt.verify_rays && !primary.packets.empty(); ++k) {
+    const size_t p = rng() % primary.packets.size();
+    const int i = static_cast<int>(rng() % kPacketSize);
+    if (!((primary.masks[p] >> i) & 1u)) continue;
+    const core::Ray r = primary.packets[p].get(i);
+    ++brute_checked;
+    if (core::intersect_brute_force(r, tris).prim != tree.intersect(r).prim) ++brute_mismatch;
+  }
+  out["verify"] = {{"packet_vs_single_mismatches", packet_mismatch}, {"brute_force_checked", brute_checked},
+                   {"brute_force_mismatches", brute_mismatch}};
+  if (packet_mismatch || brute_mismatch) {
+    throw std::runtime_error("verification failed: " + std::to_string(packet_mismatch) + " packet and " +
+                             std::to_string(brute_mismatch) + " brute-force mismatches");
+  }
+
+  Workload shadow, bounce;
+  secondary_rays(tree, primary, hits, lights, shadow, bounce);
+
+  std::vector<HitPacket> scratch(primary.packets.size());
+  auto mrays = [](size_t rays, double ms) { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; };
+  const double single_ms = median_ms(opt.runs, [&] {
+    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+      for (size_t p = t * 8; p < std::min(primary.packets.size(), t * 8 + 8); ++p) {
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((primary.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(primary.packets[p].get(i)).prim;
+        }
+      }
+    });
+  });
+  const double packet_ms = median_ms(opt.runs, [&] {
+    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+      for (size_t p = t * 8; p < std::min(primary.packets.size(), t * 8 + 8); ++p) {
+        tree.intersect(primary.packets[p], primary.masks[p], scratch[p]);
+      }
+    });
+  });
+  const size_t per_tile_shadow = 8 * std::max<size_t>(1, lights.size());
+  std::vector<LaneMask> blocked(shadow.packets.size());
+  const double shadow_ms = median_ms(opt.runs, [&] {
+    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+      for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
+        blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]);
+      }
+    });
+  });
+  const double bounce_ms = median_ms(opt.runs, [&] {
+    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+      for (size_t p = t * 8; p < std::min(bounce.packets.size(), t * 8 + 8); ++p) {
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((bounce.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(bounce.packets[p].get(i)).prim;
+        }
+      }
+    });
+  });
+  out["ray_counts"] = {{"primary", primary.rays}, {"shadow", shadow.rays}, {"incoherent", bounce.rays}};
+  out["rays"] = {{"primary_single", mrays(primary.rays, single_ms)},
+                 {"primary_packet", mrays(primary.rays, packet_ms)},
+                 {"shadow", mrays(shadow.rays, shadow_ms)},
+                 {"incoherent", mrays(bounce.rays, bounce_ms)}};
+
+  if (opt.reference == "embree") {
+#if defined(ARTRACE_HAVE_EMBREE)
+    EmbreeReference ref(tris, threads);
+    nlohmann::json e;
+    e["build_ms"] = median_ms(opt.runs, [&] { ref.build(); });
+    size_t agree = 0;
+    for (size_t p = 0; p < primary.packets.size(); ++p) {
+      uint32_t prim[kPacketSize];
+      ref.intersect8(primary.packets[p], primary.masks[p], prim);
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((primary.masks[p] >> i) & 1u) agree += prim[i] == hits[p].prim[i];
+      }
+    }
+    e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
+    auto each_tile = [&](const Workload& w, size_t per_tile, auto&& fn) {
+      return median_ms(opt.runs, [&] {
+        parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+          for (size_t p = t * per_tile; p < std::min(w.packets.size(), (t + 1) * per_tile); ++p) fn(p);
+        });
+      });
+    };
+    std::vector<uint32_t> sink(primary.packets.size() * kPacketSize);
+    e["rays"]["primary_single"] = mrays(primary.rays, each_tile(primary, 8, [&](size_t p) {
+      ref.intersect1(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
+    }));
+    e["rays"]["primary_packet"] = mrays(primary.rays, each_tile(primary, 8, [&](size_t p) {
+      ref.intersect8(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
+    }));
+    e["rays"]["shadow"] = mrays(shadow.rays, each_tile(shadow, per_tile_shadow, [&](size_t p) {
+      blocked[p] = ref.occluded8(shadow.packets[p], shadow.masks[p]);
+    }));
+    e["rays"]["incoherent"] = mrays(bounce.rays, each_tile(bounce, 8, [&](size_t p) {
+      ref.intersect1(bounce.packets[p], bounce.masks[p], &sink[p * kPacketSize]);
+    }));
+    out["embree"] = e;
+#else
+    throw std::runtime_error("this build has no Embree (install libembree-dev and reconfigure)");
+#endif
+  }
+
+  std::printf("bench-core %s t=%g %dx%d, %d threads, %s kernels, %zu triangles (median of %d runs)\n",
+              opt.scene.c_str(), opt.time, opt.width, opt.height, threads, core::to_string(core::simd_level()).c_str(),
+              tris.size(), opt.runs);
+  std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
+              st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
+  std::printf("  %-16s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
+  for (const char* key : {"primary_single", "primary_packet", "shadow", "incoherent"}) {
+    std::printf("  %-16s %12.2f", key, out["rays"][key].get<double>());
+    if (out.contains("embree")) std::printf(" %12.2f", out["embree"]["rays"][key].get<double>());
+    std::printf("\n");
+  }
+  if (out.contains("embree")) std::printf("  embree build %.1f ms\n", out["embree"]["build_ms"].get<double>());
+  if (!opt.json.empty()) {
+    const std::filesystem::path path(opt.json);
+    if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+    std::ofstream f(opt.json);
+    f << out.dump(2) << "\n";
+    if (!f) throw std::runtime_error(opt.json + ": cannot write");
+  }
+}
+
+}  // namespace
+
+void add_bench_core_command(CLI::App& app) {
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("bench-core", "kd-tree build time and ray throughput (verified, then timed)");
+  cmd->add_option("--scene", opt->scene, "BART .aff scene")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--time", opt->time, "scene time t (camera from its track)")->capture_default_str();
+  cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
+  cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
+  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
+  cmd->add_option("--runs", opt->runs, "timed runs after the warm-up (median reported)")->capture_default_str()->check(CLI::Range(1, 1000));
+  cmd->add_option("--subdivide", opt->subdivide, "split every triangle into 4, this many times")->capture_default_str()->check(CLI::Range(0, 4));
+  cmd->add_option("--verify-rays", opt->verify_rays, "primary rays checked against brute force")->capture_default_str();
+  cmd->add_option("--reference", opt->reference, "also time the same rays with: none, embree")
+      ->capture_default_str()->check(CLI::IsMember({"none", "embree"}));
+  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2")->capture_default_str();
+  cmd->add_option("--json", opt->json, "write the results as JSON");
+  cmd->callback([opt] { run(*opt); });
+}
+
+}  // namespace artrace::tools

@@ -1,0 +1,33 @@
+// Embree as a side-by-side reference in benchmarks only; the product's traversal is its own.
+#pragma once
+
+#if defined(ARTRACE_HAVE_EMBREE)
+#include "artrace/core/ray_packet.h"
+
+#include <embree3/rtcore.h>
+
+#include <vector>
+
+namespace artrace::tools {
+
+class EmbreeReference {
+ public:
+  EmbreeReference(const std::vector<core::Triangle>& tris, int threads);
+  ~EmbreeReference();
+  EmbreeReference(const EmbreeReference&) = delete;
+  EmbreeReference& operator=(const EmbreeReference&) = delete;
+
+  /// (Re)builds the scene with RTC_BUILD_QUALITY_HIGH.
+  void build();
+  void intersect1(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const;
+  void intersect8(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const;
+  core::LaneMask occluded8(const core::RayPacket& rays, core::LaneMask mask) const;
+
+ private:
+  const std::vector<core::Triangle>& tris_;
+  RTCDevice device_ = nullptr;
+  RTCScene scene_ = nullptr;
+};
+
+}  // namespace artrace::tools
+#endif
