@@ -150,6 +150,7 @@ struct Options {
   std::string scene, json, reference = "none", simd = "auto";
   double time = 0.0;
   int width = 512, height = 400, threads = 0, runs = 7, subdivide = 0, verify_rays = 1000;
+  core::KdTreeBuildOptions build;
 };
 
 void run(const Options& opt) {
@@ -174,8 +175,8 @@ void run(const Options& opt) {
   out["triangles"] = tris.size();
 
   core::KdTree tree;
-  const double build_ms = median_ms(opt.runs, [&] { arena.execute([&] { tree = core::KdTree(tris); }); });
-  const core::KdTreeStats st = tree.stats();
+  const double build_ms = median_ms(opt.runs, [&] { arena.execute([&] { tree = core::KdTree(tris, opt.build); }); });
+  const core::KdTreeStats st = tree.stats(opt.build);
   out["kdtree"] = {{"build_ms", build_ms}, {"nodes", st.nodes}, {"node_bytes", st.node_bytes},
                    {"leaves", st.leaves}, {"empty_leaves", st.empty_leaves}, {"prim_refs", st.prim_refs},
                    {"max_depth", st.max_depth}, {"sah_cost", st.sah_cost},
@@ -334,6 +335,9 @@ void add_bench_core_command(CLI::App& app) {
       ->capture_default_str()->check(CLI::IsMember({"none", "embree"}));
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2")->capture_default_str();
   cmd->add_option("--json", opt->json, "write the results as JSON");
+  cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str();
+  cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str();
+  cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str();
   cmd->callback([opt] { run(*opt); });
 }
 

@@ -15,18 +15,23 @@ namespace {
 
 enum EventType : uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
 
-/// A triangle's clipped extent entering (start), leaving (end) or lying in (planar) a plane.
-/// Sorted by position, then type (end < planar < start, as the sweep needs), then triangle.
+/// A triangle's clipped extent entering (start), leaving (end) or lying in (planar) a plane, in
+/// 8 bytes: the triangle index and the type share one word. Sorted by position, then type (end <
+/// planar < start, as the sweep needs), then triangle.
 struct Event {
   float pos;
-  uint32_t tri;
-  uint32_t type;
+  uint32_t bits;  ///< tri << 2 | type
+
+  Event() = default;
+  Event(float p, uint32_t tri, uint32_t type) : pos(p), bits(tri << 2 | type) {}
+  uint32_t tri() const { return bits >> 2; }
+  uint32_t type() const { return bits & 3u; }
 };
 
 inline bool operator<(const Event& a, const Event& b) {
   if (a.pos != b.pos) return a.pos < b.pos;
-  if (a.type != b.type) return a.type < b.type;
-  return a.tri < b.tri;
+  if (a.type() != b.type()) return a.type() < b.type();
+  return a.bits < b.bits;
 }
 
 using EventList = std::vector<Event>;
@@ -48,10 +53,10 @@ struct Subtree {
 void add_events(EventList ev[3], const Aabb& box, uint32_t tri) {
   for (int a = 0; a < 3; ++a) {
     if (box.lo[a] == box.hi[a]) {
-      ev[a].push_back({box.lo[a], tri, kPlanar});
+      ev[a].emplace_back(box.lo[a], tri, kPlanar);
     } else {
-      ev[a].push_back({box.lo[a], tri, kStart});
-      ev[a].push_back({box.hi[a], tri, kEnd});
+      ev[a].emplace_back(box.lo[a], tri, kStart);
+      ev[a].emplace_back(box.hi[a], tri, kEnd);
     }
   }
 }
@@ -85,22 +90,31 @@ Aabb intersect_boxes(const Aabb& a, const Aabb& b) {
 /// Bounds of the part of `tri` inside `voxel` ("perfect split" clipping). Falls back to the
 /// conservative box intersection when rounding clips everything away.
 Aabb clipped_bounds(const Triangle& tri, const Aabb& voxel) {
+  const Aabb tri_box = Aabb::of(tri);
   glm::vec3 buf_a[16] = {tri.v0, tri.v1, tri.v2};
   glm::vec3 buf_b[16];
   glm::vec3* in = buf_a;
   glm::vec3* out = buf_b;
   int n = 3;
+  bool clipped = false;
+  // Only the planes the triangle crosses can change its bounds.
   for (int a = 0; a < 3 && n > 0; ++a) {
-    n = clip_polygon(in, n, out, a, voxel.lo[a], false);
-    std::swap(in, out);
-    if (n == 0) break;
-    n = clip_polygon(in, n, out, a, voxel.hi[a], true);
-    std::swap(in, out);
+    if (tri_box.lo[a] < voxel.lo[a]) {
+      n = clip_polygon(in, n, out, a, voxel.lo[a], false);
+      std::swap(in, out);
+      clipped = true;
+    }
+    if (n > 0 && tri_box.hi[a] > voxel.hi[a]) {
+      n = clip_polygon(in, n, out, a, voxel.hi[a], true);
+      std::swap(in, out);
+      clipped = true;
+    }
   }
+  if (!clipped) return tri_box;
   Aabb box;
   for (int i = 0; i < n; ++i) box.extend(in[i]);
   box = intersect_boxes(box, voxel);
-  if (box.empty()) box = intersect_boxes(Aabb::of(tri), voxel);
+  if (box.empty()) box = intersect_boxes(tri_box, voxel);
   return box;
 }
 
@@ -175,9 +189,9 @@ class Builder {
       while (i < list.size()) {
         const float p = list[i].pos;
         uint32_t ending = 0, planar = 0, starting = 0;
-        while (i < list.size() && list[i].pos == p && list[i].type == kEnd) ++ending, ++i;
-        while (i < list.size() && list[i].pos == p && list[i].type == kPlanar) ++planar, ++i;
-        while (i < list.size() && list[i].pos == p && list[i].type == kStart) ++starting, ++i;
+        while (i < list.size() && list[i].pos == p && list[i].type() == kEnd) ++ending, ++i;
+        while (i < list.size() && list[i].pos == p && list[i].type() == kPlanar) ++planar, ++i;
+        while (i < list.size() && list[i].pos == p && list[i].type() == kStart) ++starting, ++i;
         n_right -= planar + ending;
         if (p > lo && p < hi) {
           const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
@@ -202,32 +216,32 @@ class Builder {
     std::vector<uint8_t>& side = sides_.local();
     const EventList& list = ev[split.axis];
     for (const Event& e : list) {
-      if (e.type != kEnd) side[e.tri] = kBoth;
+      if (e.type() != kEnd) side[e.tri()] = kBoth;
     }
     for (const Event& e : list) {
-      if (e.type == kEnd && e.pos <= split.pos) {
-        side[e.tri] = kLeftOnly;
-      } else if (e.type == kStart && e.pos >= split.pos) {
-        side[e.tri] = kRightOnly;
-      } else if (e.type == kPlanar) {
+      if (e.type() == kEnd && e.pos <= split.pos) {
+        side[e.tri()] = kLeftOnly;
+      } else if (e.type() == kStart && e.pos >= split.pos) {
+        side[e.tri()] = kRightOnly;
+      } else if (e.type() == kPlanar) {
         const bool to_left = e.pos < split.pos || (e.pos == split.pos && split.planar_left);
-        side[e.tri] = to_left ? kLeftOnly : kRightOnly;
+        side[e.tri()] = to_left ? kLeftOnly : kRightOnly;
       }
     }
     std::vector<uint32_t> straddling;
     for (const Event& e : list) {
-      if (e.type == kEnd) continue;
-      switch (side[e.tri]) {
+      if (e.type() == kEnd) continue;
+      switch (side[e.tri()]) {
         case kLeftOnly: ++n_left; break;
         case kRightOnly: ++n_right; break;
-        default: straddling.push_back(e.tri); break;
+        default: straddling.push_back(e.tri()); break;
       }
     }
     for (int a = 0; a < 3; ++a) {
       left[a].reserve(ev[a].size());
       right[a].reserve(ev[a].size());
       for (const Event& e : ev[a]) {
-        const uint8_t s = side[e.tri];
+        const uint8_t s = side[e.tri()];
         if (s == kLeftOnly) left[a].push_back(e);
         else if (s == kRightOnly) right[a].push_back(e);
       }
@@ -267,7 +281,7 @@ class Builder {
   static void make_leaf(Subtree& out, uint32_t index, const EventList& axis0) {
     const uint32_t offset = static_cast<uint32_t>(out.prims.size());
     for (const Event& e : axis0) {
-      if (e.type != kEnd) out.prims.push_back(e.tri);
+      if (e.type() != kEnd) out.prims.push_back(e.tri());
     }
     std::sort(out.prims.begin() + offset, out.prims.end());
     out.nodes[index] = KdNode::make_leaf(offset, static_cast<uint32_t>(out.prims.size()) - offset);

@@ -63,7 +63,7 @@ struct KdNode {
 static_assert(sizeof(KdNode) == 8, "kd-tree nodes are 8 bytes");
 
 struct KdTreeBuildOptions {
-  float traversal_cost = 1.0f;     ///< K_T of the SAH
+  float traversal_cost = 2.0f;     ///< K_T of the SAH
   float intersection_cost = 1.5f;  ///< K_I of the SAH
   float empty_bonus = 0.8f;        ///< cost factor lambda for splits with one empty side
   int max_depth = 0;               ///< safety cap; 0 = 8 + 1.3 log2(N), at most 60
