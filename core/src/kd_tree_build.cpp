@@ -237,17 +237,6 @@ class Builder {
         default: straddling.push_back(e.tri()); break;
       }
     }
-    for (int a = 0; a < 3; ++a) {
-      left[a].reserve(ev[a].size());
-      right[a].reserve(ev[a].size());
-      for (const Event& e : ev[a]) {
-        const uint8_t s = side[e.tri()];
-        if (s == kLeftOnly) left[a].push_back(e);
-        else if (s == kRightOnly) right[a].push_back(e);
-      }
-    }
-    if (straddling.empty()) return;
-
     Aabb voxel_left = voxel, voxel_right = voxel;
     voxel_left.hi[split.axis] = split.pos;
     voxel_right.lo[split.axis] = split.pos;
@@ -264,18 +253,29 @@ class Builder {
         ++n_right;
       }
     }
+    // One pass per axis: one-sided events are copied (they stay sorted) and the straddlers' new
+    // events, sorted on their own, are merged in on the way.
     for (int a = 0; a < 3; ++a) {
-      merge_into(left[a], new_left[a]);
-      merge_into(right[a], new_right[a]);
+      std::sort(new_left[a].begin(), new_left[a].end());
+      std::sort(new_right[a].begin(), new_right[a].end());
+      left[a].reserve(2 * static_cast<size_t>(n_left));
+      right[a].reserve(2 * static_cast<size_t>(n_right));
+      size_t il = 0, ir = 0;
+      const EventList& nl = new_left[a];
+      const EventList& nr = new_right[a];
+      for (const Event& e : ev[a]) {
+        const uint8_t s = side[e.tri()];
+        if (s == kLeftOnly) {
+          while (il < nl.size() && nl[il] < e) left[a].push_back(nl[il++]);
+          left[a].push_back(e);
+        } else if (s == kRightOnly) {
+          while (ir < nr.size() && nr[ir] < e) right[a].push_back(nr[ir++]);
+          right[a].push_back(e);
+        }
+      }
+      left[a].insert(left[a].end(), nl.begin() + static_cast<std::ptrdiff_t>(il), nl.end());
+      right[a].insert(right[a].end(), nr.begin() + static_cast<std::ptrdiff_t>(ir), nr.end());
     }
-  }
-
-  static void merge_into(EventList& list, EventList& extra) {
-    if (extra.empty()) return;
-    std::sort(extra.begin(), extra.end());
-    const size_t mid = list.size();
-    list.insert(list.end(), extra.begin(), extra.end());
-    std::inplace_merge(list.begin(), list.begin() + static_cast<std::ptrdiff_t>(mid), list.end());
   }
 
   static void make_leaf(Subtree& out, uint32_t index, const EventList& axis0) {
