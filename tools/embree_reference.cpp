@@ -6,6 +6,28 @@
 #include <string>
 
 namespace artrace::tools {
+namespace {
+
+/// Copies the packet's lanes into Embree's 8-wide ray layout; `valid` marks the lanes of `mask`.
+void fill_ray8(const core::RayPacket& rays, core::LaneMask mask, RTCRay8& r, int* valid) {
+  for (int i = 0; i < 8; ++i) {
+    valid[i] = ((mask >> i) & 1u) ? -1 : 0;
+    r.org_x[i] = rays.org[0][i];
+    r.org_y[i] = rays.org[1][i];
+    r.org_z[i] = rays.org[2][i];
+    r.dir_x[i] = rays.dir[0][i];
+    r.dir_y[i] = rays.dir[1][i];
+    r.dir_z[i] = rays.dir[2][i];
+    r.tnear[i] = rays.tmin[i];
+    r.tfar[i] = rays.tmax[i];
+    r.time[i] = 0.0f;
+    r.mask[i] = 0xffffffffu;
+    r.id[i] = static_cast<unsigned>(i);
+    r.flags[i] = 0;
+  }
+}
+
+}  // namespace
 
 EmbreeReference::EmbreeReference(const std::vector<core::Triangle>& tris, int threads) : tris_(tris) {
   const std::string config = "threads=" + std::to_string(threads);
@@ -66,22 +88,8 @@ void EmbreeReference::intersect8(const core::RayPacket& rays, core::LaneMask mas
   rtcInitIntersectContext(&ctx);
   alignas(32) int valid[8];
   alignas(32) RTCRayHit8 rh;
-  for (int i = 0; i < 8; ++i) {
-    valid[i] = ((mask >> i) & 1u) ? -1 : 0;
-    rh.ray.org_x[i] = rays.org[0][i];
-    rh.ray.org_y[i] = rays.org[1][i];
-    rh.ray.org_z[i] = rays.org[2][i];
-    rh.ray.dir_x[i] = rays.dir[0][i];
-    rh.ray.dir_y[i] = rays.dir[1][i];
-    rh.ray.dir_z[i] = rays.dir[2][i];
-    rh.ray.tnear[i] = rays.tmin[i];
-    rh.ray.tfar[i] = rays.tmax[i];
-    rh.ray.time[i] = 0.0f;
-    rh.ray.mask[i] = 0xffffffffu;
-    rh.ray.id[i] = static_cast<unsigned>(i);
-    rh.ray.flags[i] = 0;
-    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-  }
+  fill_ray8(rays, mask, rh.ray, valid);
+  for (int i = 0; i < 8; ++i) rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect8(valid, scene_, &ctx, &rh);
   for (int i = 0; i < 8; ++i) {
     if ((mask >> i) & 1u) prim[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? core::kInvalidId : rh.hit.primID[i];
@@ -93,21 +101,7 @@ core::LaneMask EmbreeReference::occluded8(const core::RayPacket& rays, core::Lan
   rtcInitIntersectContext(&ctx);
   alignas(32) int valid[8];
   alignas(32) RTCRay8 r;
-  for (int i = 0; i < 8; ++i) {
-    valid[i] = ((mask >> i) & 1u) ? -1 : 0;
-    r.org_x[i] = rays.org[0][i];
-    r.org_y[i] = rays.org[1][i];
-    r.org_z[i] = rays.org[2][i];
-    r.dir_x[i] = rays.dir[0][i];
-    r.dir_y[i] = rays.dir[1][i];
-    r.dir_z[i] = rays.dir[2][i];
-    r.tnear[i] = rays.tmin[i];
-    r.tfar[i] = rays.tmax[i];
-    r.time[i] = 0.0f;
-    r.mask[i] = 0xffffffffu;
-    r.id[i] = static_cast<unsigned>(i);
-    r.flags[i] = 0;
-  }
+  fill_ray8(rays, mask, r, valid);
   rtcOccluded8(valid, scene_, &ctx, &r);
   core::LaneMask blocked = 0;
   for (int i = 0; i < 8; ++i) {
