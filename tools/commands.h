@@ -17,7 +17,4 @@ void add_bench_core_command(CLI::App& app);
 /// interrupted run never leaves a half-written file under the final name. Throws on failure.
 void write_png(const core::Image& img, const std::filesystem::path& path);
 
-/// A 3D scene the tools can load: a BART .aff file (anything else is refused with the reason).
-struct LoadedScene;
-
 }  // namespace artrace::tools

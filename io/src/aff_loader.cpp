@@ -270,7 +270,7 @@ class Parser {
     if (k == "c") return cone(lex);
     if (k == "m") return mesh(lex, dir);
     if (k == "tpa") return animated_triangle(lex);
-    if (k == "i") return include(lex, tok, dir, depth);
+    if (k == "i") return include(lex, dir, depth);
     if (k == "xs") return static_transform(lex);
     if (k == "x") return animated_transform(lex);
     if (k == "k") return keyframes(lex, tok);
@@ -467,11 +467,10 @@ class Parser {
     scene_.animated_triangles.push_back(std::move(a));
   }
 
-  void include(Lexer& lex, const Token& tok, const std::filesystem::path& dir, int depth) {
+  void include(Lexer& lex, const std::filesystem::path& dir, int depth) {
     integer(lex, "the detail level", -1000000, 1000000);
     const Token name = expect_token(lex, "an include file name");
     parse_file(dir / std::string(name.text), depth + 1, &lex, &name);
-    (void)tok;
   }
 
   void static_transform(Lexer& lex) {
@@ -571,8 +570,6 @@ glm::dmat4 AffScene::node_transform(int node, double t) const {
   }
   return m;
 }
-
-bool AffScene::node_is_dynamic(int node) const { return node > 0; }
 
 std::vector<core::Triangle> AffScene::triangles_at(double t) const {
   std::vector<core::Triangle> out;

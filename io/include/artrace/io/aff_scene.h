@@ -83,8 +83,6 @@ struct AffScene {
   double frame_time(int frame) const;
   /// World transform of a node at time t.
   glm::dmat4 node_transform(int node, double t) const;
-  /// True when the node or one of its ancestors is animated.
-  bool node_is_dynamic(int node) const;
   /// Every triangle of the scene in world space at time t: static nodes first, then the dynamic
   /// nodes in order, then the animated triangles.
   std::vector<core::Triangle> triangles_at(double t) const;
