@@ -61,6 +61,7 @@ void KdTree::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) co
         hits.t[i] = rays.tmax[i];
         hits.u[i] = hits.v[i] = 0.0f;
         hits.prim[i] = kInvalidId;
+        hits.inst[i] = kInvalidId;
       }
     }
     return;

@@ -1,7 +1,9 @@
 // Entry points of the traversal kernels, one namespace per instruction set. Internal to core.
 #pragma once
 
+#include "artrace/core/bvh.h"
 #include "artrace/core/kd_tree.h"
+#include "artrace/core/two_level_scene.h"
 
 namespace artrace::core {
 
@@ -16,18 +18,41 @@ LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask
 /// The portable fallback: the 8 lanes one after the other with the width-1 kernel.
 void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask occluded_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
+
+Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray);
+bool bvh_occluded_single(const BvhView& bvh, const Ray& ray);
+void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
+void bvh_intersect_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask bvh_occluded_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
+
+/// Two-level: continues from the closest hits in `hit` / `hits` (the static kd-tree's).
+void two_level_intersect_single(const TwoLevelView& scene, const Ray& ray, Hit& hit);
+bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray);
+void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
+void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
 }  // namespace sse
 
 namespace avx2 {
 /// Packets of 8 in one 8-wide pass; call only when the CPU has AVX2.
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
+void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
+void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
 }  // namespace avx2
 
 /// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
 struct PacketKernels {
   void (*intersect)(const KdTreeView&, const RayPacket&, LaneMask, HitPacket&);
   LaneMask (*occluded)(const KdTreeView&, const RayPacket&, LaneMask);
+  void (*bvh_intersect)(const BvhView&, const RayPacket&, LaneMask, HitPacket&);
+  LaneMask (*bvh_occluded)(const BvhView&, const RayPacket&, LaneMask);
+  void (*two_level_intersect)(const TwoLevelView&, const RayPacket&, LaneMask, HitPacket&);
+  LaneMask (*two_level_occluded)(const TwoLevelView&, const RayPacket&, LaneMask);
 };
 const PacketKernels& packet_kernels();
 

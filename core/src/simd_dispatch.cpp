@@ -23,11 +23,15 @@ SimdLevel resolve(SimdLevel level) {
 PacketKernels kernels_for(SimdLevel level) {
   switch (level) {
     case SimdLevel::kAvx2:
-      return {&avx2::intersect_packet, &avx2::occluded_packet};
+      return {&avx2::intersect_packet, &avx2::occluded_packet, &avx2::bvh_intersect_packet,
+              &avx2::bvh_occluded_packet, &avx2::two_level_intersect_packet, &avx2::two_level_occluded_packet};
     case SimdLevel::kSse:
-      return {&sse::intersect_packet, &sse::occluded_packet};
+      return {&sse::intersect_packet, &sse::occluded_packet, &sse::bvh_intersect_packet,
+              &sse::bvh_occluded_packet, &sse::two_level_intersect_packet, &sse::two_level_occluded_packet};
     default:
-      return {&sse::intersect_packet_scalar, &sse::occluded_packet_scalar};
+      return {&sse::intersect_packet_scalar, &sse::occluded_packet_scalar, &sse::bvh_intersect_packet_scalar,
+              &sse::bvh_occluded_packet_scalar, &sse::two_level_intersect_packet_scalar,
+              &sse::two_level_occluded_packet_scalar};
   }
 }
 

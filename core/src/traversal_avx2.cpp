@@ -3,6 +3,7 @@
 // the CPU reported AVX2.
 #include "kernels.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <type_traits>
@@ -19,6 +20,45 @@ void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask ma
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
   return mask ? trace_lanes<8, true>(tree, rays, 0, mask, nullptr) : 0u;
+}
+
+
+void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (!mask) return;
+  BestHits<8> best;
+  best.t = load<Vec<8>::F>(rays.tmax);
+  best.u = best.v = splat<Vec<8>::F>(0.0f);
+  best.prim = best.inst = splat<Vec<8>::U>(kInvalidId);
+  best.done = splat<Vec<8>::M>(0);
+  trace_bvh_lanes<8, false>(bvh, rays.org, rays.dir, rays.tmin, mask, best, kInvalidId);
+  for (int i = 0; i < 8; ++i) {
+    if ((mask >> i) & 1u) {
+      hits.t[i] = lane(best.t, i);
+      hits.u[i] = lane(best.u, i);
+      hits.v[i] = lane(best.v, i);
+      hits.prim[i] = lane(best.prim, i);
+      hits.inst[i] = lane(best.inst, i);
+    }
+  }
+}
+
+LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
+  if (!mask) return 0;
+  BestHits<8> best;
+  best.t = load<Vec<8>::F>(rays.tmax);
+  best.u = best.v = splat<Vec<8>::F>(0.0f);
+  best.prim = best.inst = splat<Vec<8>::U>(kInvalidId);
+  best.done = splat<Vec<8>::M>(0);
+  trace_bvh_lanes<8, true>(bvh, rays.org, rays.dir, rays.tmin, mask, best, kInvalidId);
+  return movemask(best.done) & mask;
+}
+
+void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (mask) trace_two_level_packet<8, false>(scene, rays, 0, mask, &hits);
+}
+
+LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
+  return mask ? trace_two_level_packet<8, true>(scene, rays, 0, mask, nullptr) : 0u;
 }
 
 }  // namespace artrace::core::avx2

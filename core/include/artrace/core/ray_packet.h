@@ -41,6 +41,7 @@ struct alignas(32) HitPacket {
   float u[kPacketSize];
   float v[kPacketSize];
   uint32_t prim[kPacketSize];
+  uint32_t inst[kPacketSize];  ///< object of the hit in two-level scenes (kInvalidId otherwise)
 
   Hit get(int lane) const {
     Hit h;
@@ -48,6 +49,7 @@ struct alignas(32) HitPacket {
     h.u = u[lane];
     h.v = v[lane];
     h.prim = prim[lane];
+    h.inst = inst[lane];
     return h;
   }
 };

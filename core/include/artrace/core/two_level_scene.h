@@ -1,0 +1,160 @@
+// Two-level scene after I. Wald, "Realtime Ray Tracing and Interactive Global Illumination" (PhD
+// thesis, 2004, chapter 9), with BVHs instead of BSPs for the objects: a top level over the objects'
+// world bounds, rebuilt every frame (it holds tens to hundreds of objects, so this costs
+// microseconds), above
+//   - the static geometry: a kd-tree (`kKdTreeBvh`) or one more BVH instance (`kBvh`);
+//   - rigid meshes: a BVH built once in object space, shared by any number of instances, each with
+//     its own transform (rays are taken to object space; mirroring and non-uniform scale are fine);
+//   - deforming meshes: vertex and index buffers the application writes, then refits, restructures
+//     or rebuilds (DeformableMesh).
+// The application edits, then calls commit(); tracing between commits sees a consistent scene.
+#pragma once
+
+#include "artrace/core/bvh.h"
+#include "artrace/core/kd_tree.h"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace artrace::core {
+
+/// `Hit::inst` of hits on the static geometry.
+inline constexpr uint32_t kStaticObject = 0xfffffffeu;
+
+struct TopNode {
+  Aabb bounds;
+  uint32_t first = 0;  ///< inner: left child (right = first + 1); leaf: first entry of `order`
+  uint16_t count = 0;  ///< 0 for inner nodes
+  uint16_t axis = 0;
+};
+
+struct InstanceData {
+  BvhView bvh;
+  float object_from_world[12];  ///< 3x4, row-major
+  Aabb world_bounds;
+  uint32_t id;
+};
+
+struct TwoLevelView {
+  const TopNode* nodes;
+  const uint32_t* order;
+  const InstanceData* instances;
+  uint32_t node_count;
+};
+
+/// A mesh whose vertices (and, with rebuild(), triangles) change from frame to frame.
+class DeformableMesh {
+ public:
+  explicit DeformableMesh(TriangleMesh mesh);
+
+  /// The buffers the application writes between frames.
+  std::vector<glm::vec3>& positions() { return mesh_.positions; }
+  std::vector<glm::uvec3>& indices() { return mesh_.indices; }
+  const TriangleMesh& mesh() const { return mesh_; }
+
+  /// Same triangles, moved vertices: refits the BVH. Throws std::logic_error when the index buffer
+  /// changed since the last rebuild (call rebuild), std::out_of_range for an index past the vertices.
+  void refit();
+  /// refit, then rebuilds the degenerate subtrees (Bvh::restructure); returns how many.
+  uint32_t restructure();
+  /// Triangles added, removed or re-indexed: a new BVH over the current buffers.
+  void rebuild();
+
+  const Bvh& bvh() const { return bvh_; }
+
+ private:
+  uint64_t index_fingerprint() const;
+  void flatten();
+
+  TriangleMesh mesh_;
+  std::vector<Triangle> tris_;
+  Bvh bvh_;
+  uint64_t fingerprint_ = 0;
+};
+
+/// Handles: slot index plus a generation, so a handle to a removed object is detected.
+struct MeshHandle {
+  uint32_t index = kInvalidId;
+  uint32_t generation = 0;
+};
+struct InstanceHandle {
+  uint32_t index = kInvalidId;
+  uint32_t generation = 0;
+};
+struct DeformableHandle {
+  uint32_t index = kInvalidId;
+  uint32_t generation = 0;
+};
+
+class TwoLevelScene {
+ public:
+  enum class Config { kBvh, kKdTreeBvh };
+  static Config parse_config(const std::string& name);  ///< "bvh" or "kdtree+bvh"
+
+  explicit TwoLevelScene(Config config = Config::kKdTreeBvh) : config_(config) {}
+
+  /// The geometry that never moves (kd-tree or lazy BVH, by configuration).
+  void set_static(std::vector<Triangle> tris);
+  /// A rigid mesh in object space; its BVH is built lazily and shared by its instances.
+  MeshHandle add_rigid_mesh(std::vector<Triangle> object_space);
+  InstanceHandle add_instance(MeshHandle mesh, const glm::mat4& world_from_object);
+  void set_transform(InstanceHandle inst, const glm::mat4& world_from_object);
+  void remove_instance(InstanceHandle inst);
+  DeformableHandle add_deformable(TriangleMesh world_space);
+  DeformableMesh& deformable(DeformableHandle h);
+  void remove_deformable(DeformableHandle h);
+
+  /// Takes the edits since the last commit: world bounds of every object, a new top level.
+  void commit();
+
+  /// Closest hit; `Hit::inst` is the instance index, `kStaticObject`, or for deformable meshes
+  /// `deformable_object_id(handle)`.
+  Hit intersect(const Ray& ray) const;
+  bool occluded(const Ray& ray) const;
+  void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
+  LaneMask occluded(const RayPacket& rays, LaneMask mask) const;
+
+  /// The triangle a hit names, in world space.
+  Triangle world_triangle(const Hit& hit) const;
+  static uint32_t deformable_object_id(DeformableHandle h) { return 0x80000000u | h.index; }
+
+  Config config() const { return config_; }
+  size_t instance_count() const;
+  /// Nodes of all object BVHs built so far (lazily) and still waiting.
+  BvhStats bvh_stats() const;
+  const KdTree* static_kd_tree() const { return config_ == Config::kKdTreeBvh ? &kd_ : nullptr; }
+
+ private:
+  struct Instance {
+    uint32_t mesh = kInvalidId;
+    uint32_t generation = 0;
+    bool alive = false;
+    glm::mat4 world_from_object{1.0f};
+  };
+  struct RigidMesh {
+    std::unique_ptr<Bvh> bvh;
+    uint32_t generation = 0;
+  };
+  struct Deformable {
+    std::unique_ptr<DeformableMesh> mesh;
+    uint32_t generation = 0;
+  };
+
+  Instance& checked(InstanceHandle h);
+  void build_top(uint32_t node, uint32_t begin, uint32_t end, int depth);
+
+  Config config_;
+  KdTree kd_;
+  std::unique_ptr<Bvh> static_bvh_;
+  std::vector<RigidMesh> meshes_;
+  std::vector<Instance> instances_;
+  std::vector<Deformable> deformables_;
+  // committed state
+  std::vector<InstanceData> data_;
+  std::vector<uint32_t> order_;
+  std::vector<TopNode> top_;
+  bool dirty_ = true;
+};
+
+}  // namespace artrace::core

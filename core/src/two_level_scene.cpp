@@ -1,0 +1,317 @@
+#include "artrace/core/two_level_scene.h"
+#include "kernels.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace artrace::core {
+namespace {
+
+/// World bounds of an object box under an affine transform, widened by a relative margin so that
+/// rounding never makes the top level cull a ray that reaches the object.
+Aabb transform_box(const Aabb& b, const glm::mat4& m) {
+  Aabb out;
+  if (b.empty()) return out;
+  for (int c = 0; c < 8; ++c) {
+    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
+    out.extend(glm::vec3(m * glm::vec4(p, 1.0f)));
+  }
+  const glm::vec3 pad = 1e-5f * (glm::abs(out.lo) + glm::abs(out.hi) + out.extent()) + glm::vec3(1e-30f);
+  return Aabb{out.lo - pad, out.hi + pad};
+}
+
+void set_rows(float out[12], const glm::mat4& m) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) out[4 * r + c] = m[c][r];
+  }
+}
+
+}  // namespace
+
+// ---- DeformableMesh
+
+DeformableMesh::DeformableMesh(TriangleMesh mesh) : mesh_(std::move(mesh)) {
+  flatten();
+  bvh_.rebuild(tris_);
+  fingerprint_ = index_fingerprint();
+}
+
+uint64_t DeformableMesh::index_fingerprint() const {
+  uint64_t h = 1469598103934665603ull ^ mesh_.indices.size();
+  for (const glm::uvec3& t : mesh_.indices) {
+    for (int k = 0; k < 3; ++k) {
+      h ^= t[k];
+      h *= 1099511628211ull;
+    }
+  }
+  return h;
+}
+
+void DeformableMesh::flatten() {
+  tris_.clear();
+  mesh_.flatten_into(tris_);
+}
+
+void DeformableMesh::refit() {
+  if (index_fingerprint() != fingerprint_) {
+    throw std::logic_error("deformable mesh: the index buffer changed since the last rebuild(); "
+                           "refit() keeps the topology, call rebuild()");
+  }
+  flatten();
+  bvh_.refit(tris_);
+}
+
+uint32_t DeformableMesh::restructure() {
+  if (index_fingerprint() != fingerprint_) {
+    throw std::logic_error("deformable mesh: the index buffer changed since the last rebuild(); "
+                           "restructure() keeps the topology, call rebuild()");
+  }
+  flatten();
+  return bvh_.restructure(tris_);
+}
+
+void DeformableMesh::rebuild() {
+  flatten();
+  bvh_.rebuild(tris_);
+  fingerprint_ = index_fingerprint();
+}
+
+// ---- TwoLevelScene
+
+TwoLevelScene::Config TwoLevelScene::parse_config(const std::string& name) {
+  if (name == "bvh") return Config::kBvh;
+  if (name == "kdtree+bvh") return Config::kKdTreeBvh;
+  throw std::invalid_argument("unknown scene configuration '" + name + "' (expected bvh or kdtree+bvh)");
+}
+
+void TwoLevelScene::set_static(std::vector<Triangle> tris) {
+  if (config_ == Config::kKdTreeBvh) {
+    kd_ = KdTree(std::move(tris));
+  } else {
+    static_bvh_ = std::make_unique<Bvh>(std::move(tris));
+  }
+  dirty_ = true;
+}
+
+MeshHandle TwoLevelScene::add_rigid_mesh(std::vector<Triangle> object_space) {
+  RigidMesh m;
+  m.bvh = std::make_unique<Bvh>(std::move(object_space));
+  meshes_.push_back(std::move(m));
+  dirty_ = true;
+  return {static_cast<uint32_t>(meshes_.size() - 1), 0};
+}
+
+InstanceHandle TwoLevelScene::add_instance(MeshHandle mesh, const glm::mat4& world_from_object) {
+  if (mesh.index >= meshes_.size() || meshes_[mesh.index].generation != mesh.generation) {
+    throw std::invalid_argument("add_instance: invalid mesh handle " + std::to_string(mesh.index));
+  }
+  Instance inst;
+  inst.mesh = mesh.index;
+  inst.alive = true;
+  inst.world_from_object = world_from_object;
+  // reuse a removed slot (its generation moves on, so old handles to it stay invalid)
+  for (uint32_t i = 0; i < instances_.size(); ++i) {
+    if (!instances_[i].alive) {
+      inst.generation = instances_[i].generation;
+      instances_[i] = inst;
+      dirty_ = true;
+      return {i, inst.generation};
+    }
+  }
+  instances_.push_back(inst);
+  dirty_ = true;
+  return {static_cast<uint32_t>(instances_.size() - 1), 0};
+}
+
+TwoLevelScene::Instance& TwoLevelScene::checked(InstanceHandle h) {
+  if (h.index >= instances_.size() || !instances_[h.index].alive || instances_[h.index].generation != h.generation) {
+    throw std::invalid_argument("stale or invalid instance handle " + std::to_string(h.index) + " (generation " +
+                                std::to_string(h.generation) + ")");
+  }
+  return instances_[h.index];
+}
+
+void TwoLevelScene::set_transform(InstanceHandle h, const glm::mat4& world_from_object) {
+  checked(h).world_from_object = world_from_object;
+  dirty_ = true;
+}
+
+void TwoLevelScene::remove_instance(InstanceHandle h) {
+  Instance& inst = checked(h);
+  inst.alive = false;
+  ++inst.generation;
+  dirty_ = true;
+}
+
+DeformableHandle TwoLevelScene::add_deformable(TriangleMesh world_space) {
+  Deformable d;
+  d.mesh = std::make_unique<DeformableMesh>(std::move(world_space));
+  deformables_.push_back(std::move(d));
+  dirty_ = true;
+  return {static_cast<uint32_t>(deformables_.size() - 1), 0};
+}
+
+DeformableMesh& TwoLevelScene::deformable(DeformableHandle h) {
+  if (h.index >= deformables_.size() || !deformables_[h.index].mesh || deformables_[h.index].generation != h.generation) {
+    throw std::invalid_argument("stale or invalid deformable handle " + std::to_string(h.index));
+  }
+  dirty_ = true;  // the application is about to edit it
+  return *deformables_[h.index].mesh;
+}
+
+void TwoLevelScene::remove_deformable(DeformableHandle h) {
+  deformable(h);
+  deformables_[h.index].mesh.reset();
+  ++deformables_[h.index].generation;
+}
+
+void TwoLevelScene::commit() {
+  data_.clear();
+  const glm::mat4 identity(1.0f);
+  auto add = [&](const Bvh& bvh, const glm::mat4& world_from_object, uint32_t id) {
+    if (bvh.triangles().empty()) return;
+    InstanceData d;
+    d.bvh = bvh.view();
+    set_rows(d.object_from_world, glm::inverse(world_from_object));
+    d.world_bounds = transform_box(bvh.bounds(), world_from_object);
+    d.id = id;
+    data_.push_back(d);
+  };
+  if (static_bvh_) add(*static_bvh_, identity, kStaticObject);
+  for (uint32_t i = 0; i < instances_.size(); ++i) {
+    const Instance& inst = instances_[i];
+    if (inst.alive) add(*meshes_[inst.mesh].bvh, inst.world_from_object, i);
+  }
+  for (uint32_t i = 0; i < deformables_.size(); ++i) {
+    if (deformables_[i].mesh) add(deformables_[i].mesh->bvh(), identity, deformable_object_id({i, 0}));
+  }
+  order_.resize(data_.size());
+  for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;
+  top_.clear();
+  if (!data_.empty()) {
+    top_.emplace_back();
+    build_top(0, 0, static_cast<uint32_t>(data_.size()), 0);
+  }
+  dirty_ = false;
+}
+
+void TwoLevelScene::build_top(uint32_t node, uint32_t begin, uint32_t end, int depth) {
+  Aabb box, centres;
+  for (uint32_t i = begin; i < end; ++i) {
+    box.extend(data_[order_[i]].world_bounds);
+    const Aabb& b = data_[order_[i]].world_bounds;
+    centres.extend(0.5f * (b.lo + b.hi));
+  }
+  top_[node].bounds = box;
+  if (end - begin <= 2 || depth >= 48) {
+    top_[node].first = begin;
+    top_[node].count = static_cast<uint16_t>(end - begin);
+    return;
+  }
+  const glm::vec3 e = centres.extent();
+  const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+  const uint32_t mid = begin + (end - begin) / 2;
+  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, [&](uint32_t a, uint32_t b) {
+    const float ca = data_[a].world_bounds.lo[axis] + data_[a].world_bounds.hi[axis];
+    const float cb = data_[b].world_bounds.lo[axis] + data_[b].world_bounds.hi[axis];
+    return ca < cb || (ca == cb && a < b);
+  });
+  const uint32_t child = static_cast<uint32_t>(top_.size());
+  top_.resize(child + 2);
+  top_[node].first = child;
+  top_[node].count = 0;
+  top_[node].axis = static_cast<uint16_t>(axis);
+  build_top(child, begin, mid, depth + 1);
+  build_top(child + 1, mid, end, depth + 1);
+}
+
+namespace {
+
+void require_committed(bool dirty) {
+  if (dirty) throw std::logic_error("two-level scene: call commit() after editing, before tracing");
+}
+
+}  // namespace
+
+Hit TwoLevelScene::intersect(const Ray& ray) const {
+  require_committed(dirty_);
+  Hit h;
+  if (config_ == Config::kKdTreeBvh) {
+    h = kd_.intersect(ray);
+    if (h.valid()) h.inst = kStaticObject;
+  }
+  const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
+  sse::two_level_intersect_single(view, ray, h);
+  return h;
+}
+
+bool TwoLevelScene::occluded(const Ray& ray) const {
+  require_committed(dirty_);
+  if (config_ == Config::kKdTreeBvh && kd_.occluded(ray)) return true;
+  const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
+  return sse::two_level_occluded_single(view, ray);
+}
+
+void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const {
+  require_committed(dirty_);
+  mask &= kAllLanes;
+  if (config_ == Config::kKdTreeBvh) {
+    kd_.intersect(rays, mask, hits);
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (((mask >> i) & 1u) && hits.prim[i] != kInvalidId) hits.inst[i] = kStaticObject;
+    }
+  } else {
+    for (int i = 0; i < kPacketSize; ++i) {
+      hits.t[i] = rays.tmax[i];
+      hits.u[i] = hits.v[i] = 0.0f;
+      hits.prim[i] = hits.inst[i] = kInvalidId;
+    }
+  }
+  if (top_.empty() || mask == 0) return;
+  const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
+  packet_kernels().two_level_intersect(view, rays, mask, hits);
+}
+
+LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask) const {
+  require_committed(dirty_);
+  mask &= kAllLanes;
+  LaneMask blocked = config_ == Config::kKdTreeBvh ? kd_.occluded(rays, mask) : 0u;
+  const LaneMask rest = mask & ~blocked;
+  if (top_.empty() || rest == 0) return blocked;
+  const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
+  return blocked | packet_kernels().two_level_occluded(view, rays, rest);
+}
+
+Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
+  if (hit.inst == kStaticObject) {
+    return config_ == Config::kKdTreeBvh ? kd_.triangles().at(hit.prim) : static_bvh_->triangles().at(hit.prim);
+  }
+  if (hit.inst & 0x80000000u) return deformables_.at(hit.inst & 0x7fffffffu).mesh->bvh().triangles().at(hit.prim);
+  const Instance& inst = instances_.at(hit.inst);
+  const Triangle& t = meshes_[inst.mesh].bvh->triangles().at(hit.prim);
+  const glm::mat4& m = inst.world_from_object;
+  return {glm::vec3(m * glm::vec4(t.v0, 1.0f)), glm::vec3(m * glm::vec4(t.v1, 1.0f)), glm::vec3(m * glm::vec4(t.v2, 1.0f))};
+}
+
+size_t TwoLevelScene::instance_count() const {
+  return static_cast<size_t>(std::count_if(instances_.begin(), instances_.end(), [](const Instance& i) { return i.alive; }));
+}
+
+BvhStats TwoLevelScene::bvh_stats() const {
+  BvhStats total;
+  auto add = [&](const Bvh& b) {
+    const BvhStats s = b.stats();
+    total.nodes_built += s.nodes_built;
+    total.nodes_unbuilt += s.nodes_unbuilt;
+    total.leaves += s.leaves;
+    total.max_depth = std::max(total.max_depth, s.max_depth);
+  };
+  if (static_bvh_) add(*static_bvh_);
+  for (const RigidMesh& m : meshes_) add(*m.bvh);
+  for (const Deformable& d : deformables_) {
+    if (d.mesh) add(d.mesh->bvh());
+  }
+  return total;
+}
+
+}  // namespace artrace::core

@@ -1,0 +1,210 @@
+#include "artrace/core/kinematic_tree.h"
+#include "artrace/core/simd_level.h"
+#include "artrace/core/two_level_scene.h"
+#include "../test_util.h"
+
+#include <glm/gtc/matrix_transform.hpp>
+
+namespace artrace::core {
+namespace {
+
+using Config = TwoLevelScene::Config;
+
+std::vector<Triangle> transformed(const std::vector<Triangle>& tris, const glm::mat4& m) {
+  std::vector<Triangle> out;
+  for (const Triangle& t : tris) {
+    out.push_back({glm::vec3(m * glm::vec4(t.v0, 1)), glm::vec3(m * glm::vec4(t.v1, 1)), glm::vec3(m * glm::vec4(t.v2, 1))});
+  }
+  return out;
+}
+
+/// Compares the scene with brute force over `flat`. Instanced geometry is transformed in float on
+/// both sides in different ways, so distances agree to 1e-4 relative and a ray grazing an edge may
+/// pick the neighbour: at most `max_disagree` such rays.
+void expect_matches_flat(const TwoLevelScene& scene, const std::vector<Triangle>& flat, const std::vector<Ray>& rays,
+                         size_t max_disagree, const std::string& what) {
+  size_t disagree = 0, hits = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Hit ref = intersect_brute_force(rays[i], flat);
+    const Hit got = scene.intersect(rays[i]);
+    hits += ref.valid();
+    const bool same = ref.valid() == got.valid() &&
+                      (!ref.valid() || std::fabs(ref.t - got.t) <= 1e-4f * std::max(1.0f, ref.t));
+    if (!same) ++disagree;
+    if (got.valid()) {
+      // the triangle the hit names contains the hit point
+      const Triangle w = scene.world_triangle(got);
+      const glm::vec3 p = rays[i].org + got.t * rays[i].dir;
+      const glm::vec3 q = (1.0f - got.u - got.v) * w.v0 + got.u * w.v1 + got.v * w.v2;
+      ASSERT_LT(glm::length(p - q), 1e-3f * (1.0f + glm::length(p))) << what << " ray " << i;
+    }
+    ASSERT_EQ(scene.occluded(rays[i]), got.valid()) << what << " ray " << i;
+  }
+  EXPECT_LE(disagree, max_disagree) << what << " (" << hits << " hits of " << rays.size() << ")";
+  EXPECT_GT(hits, rays.size() / 10) << what;
+}
+
+/// Instances with non-uniform scale, rotation and mirroring are hit where the flattened geometry is.
+TEST(TwoLevelScene, InstancesMatchFlattenedGeometry) {
+  std::mt19937 rng(41);
+  const auto object = test::closed_sphere({0, 0, 0}, 1.0f, 16);
+  const auto ground = test::random_soup(rng, 500, 0.5f);
+  std::vector<glm::mat4> transforms;
+  for (int i = 0; i < 12; ++i) {
+    glm::mat4 m = glm::translate(glm::mat4(1.0f), test::random_point(rng, 0.0f, 10.0f));
+    m = glm::rotate(m, static_cast<float>(i), glm::normalize(glm::vec3(1.0f, 2.0f, 3.0f - i)));
+    m = glm::scale(m, glm::vec3(0.5f + 0.1f * i, 1.5f, (i % 3 == 0) ? -0.7f : 0.7f));  // some mirrored
+    transforms.push_back(m);
+  }
+  for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
+    TwoLevelScene scene(config);
+    scene.set_static(ground);
+    const MeshHandle mesh = scene.add_rigid_mesh(object);
+    std::vector<Triangle> flat = ground;
+    for (const glm::mat4& m : transforms) {
+      scene.add_instance(mesh, m);
+      const auto t = transformed(object, m);
+      flat.insert(flat.end(), t.begin(), t.end());
+    }
+    scene.commit();
+    expect_matches_flat(scene, flat, test::random_rays(rng, 6000), 6,
+                        config == Config::kBvh ? "bvh" : "kdtree+bvh");
+  }
+}
+
+TEST(TwoLevelScene, ConfigurationsGiveIdenticalHitsOnStaticGeometry) {
+  std::mt19937 rng(42);
+  const auto tris = test::random_soup(rng, 3000, 0.4f);
+  TwoLevelScene a(Config::kKdTreeBvh), b(Config::kBvh);
+  a.set_static(tris);
+  b.set_static(tris);
+  a.commit();
+  b.commit();
+  for (const Ray& r : test::random_rays(rng, 3000)) {
+    const Hit ha = a.intersect(r), hb = b.intersect(r);
+    ASSERT_EQ(ha.prim, hb.prim);
+    ASSERT_EQ(ha.inst, hb.inst);
+    if (ha.valid()) {
+      ASSERT_EQ(ha.t, hb.t);
+    }
+  }
+}
+
+/// A deforming mesh whose vertices are scrambled every frame stays exact.
+TEST(TwoLevelScene, ScrambledDeformingMeshStaysCorrect) {
+  std::mt19937 rng(43);
+  TriangleMesh mesh;
+  for (int i = 0; i < 3000; ++i) mesh.positions.push_back(test::random_point(rng, 0.0f, 10.0f));
+  std::uniform_int_distribution<uint32_t> pick(0, 2999);
+  for (int i = 0; i < 1000; ++i) mesh.indices.push_back({pick(rng), pick(rng), pick(rng)});
+  TwoLevelScene scene(Config::kKdTreeBvh);
+  const DeformableHandle h = scene.add_deformable(mesh);
+  scene.commit();
+  for (int frame = 0; frame < 8; ++frame) {
+    DeformableMesh& d = scene.deformable(h);
+    for (auto& p : d.positions()) p = test::random_point(rng, 0.0f, 10.0f);
+    if (frame % 3 == 0) d.refit();
+    else if (frame % 3 == 1) d.restructure();
+    else d.rebuild();
+    scene.commit();
+    std::vector<Triangle> flat;
+    d.mesh().flatten_into(flat);
+    for (const Ray& r : test::random_rays(rng, 1500)) {
+      const Hit ref = intersect_brute_force(r, flat);
+      const Hit got = scene.intersect(r);
+      ASSERT_EQ(ref.prim, got.prim) << "frame " << frame;
+      if (ref.valid()) {
+        ASSERT_EQ(ref.t, got.t);
+      }
+    }
+  }
+}
+
+TEST(TwoLevelScene, PacketsEqualSingleRays) {
+  std::mt19937 rng(44);
+  TwoLevelScene scene(Config::kKdTreeBvh);
+  scene.set_static(test::random_soup(rng, 2000, 0.4f));
+  const MeshHandle mesh = scene.add_rigid_mesh(test::closed_sphere({0, 0, 0}, 1.0f, 12));
+  for (int i = 0; i < 8; ++i) {
+    scene.add_instance(mesh, glm::scale(glm::translate(glm::mat4(1.0f), test::random_point(rng, 0, 10)), glm::vec3(1, 2, -1)));
+  }
+  scene.commit();
+  const SimdLevel saved = simd_level();
+  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+    if (!simd_level_supported(level)) continue;
+    set_simd_level(level);
+    for (int p = 0; p < 600; ++p) {
+      RayPacket packet;
+      const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+      const glm::vec3 base = test::random_direction(rng);
+      for (int i = 0; i < kPacketSize; ++i) {
+        packet.set(i, Ray{o, p % 2 ? test::random_direction(rng) : glm::normalize(base + 0.05f * test::random_direction(rng))});
+      }
+      HitPacket hits;
+      scene.intersect(packet, kAllLanes, hits);
+      const LaneMask blocked = scene.occluded(packet, kAllLanes);
+      for (int i = 0; i < kPacketSize; ++i) {
+        const Hit h = scene.intersect(packet.get(i));
+        ASSERT_EQ(hits.prim[i], h.prim) << to_string(level);
+        ASSERT_EQ(hits.inst[i], h.inst);
+        if (h.valid()) {
+          ASSERT_EQ(hits.t[i], h.t);
+        }
+        ASSERT_EQ(((blocked >> i) & 1u) != 0, h.valid());
+      }
+    }
+  }
+  set_simd_level(saved);
+}
+
+TEST(TwoLevelScene, MisuseIsReported) {
+  TwoLevelScene scene;
+  const MeshHandle mesh = scene.add_rigid_mesh({{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}});
+  const InstanceHandle inst = scene.add_instance(mesh, glm::mat4(1.0f));
+  EXPECT_THROW(scene.intersect(Ray{}), std::logic_error) << "tracing before commit";
+  scene.commit();
+  scene.remove_instance(inst);
+  EXPECT_THROW(scene.set_transform(inst, glm::mat4(1.0f)), std::invalid_argument) << "stale handle";
+  const InstanceHandle again = scene.add_instance(mesh, glm::mat4(1.0f));
+  EXPECT_EQ(again.index, inst.index) << "the slot is reused";
+  EXPECT_THROW(scene.set_transform(inst, glm::mat4(1.0f)), std::invalid_argument) << "old handle to a reused slot";
+  EXPECT_NO_THROW(scene.set_transform(again, glm::mat4(2.0f)));
+  EXPECT_THROW(scene.add_instance(MeshHandle{7, 0}, glm::mat4(1.0f)), std::invalid_argument);
+
+  TriangleMesh m;
+  m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
+  m.indices = {{0, 1, 2}};
+  const DeformableHandle d = scene.add_deformable(m);
+  scene.deformable(d).indices().push_back({1, 3, 2});
+  try {
+    scene.deformable(d).refit();
+    ADD_FAILURE() << "refit after a topology change must throw";
+  } catch (const std::logic_error& e) {
+    EXPECT_NE(std::string(e.what()).find("call rebuild()"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(scene.deformable(d).rebuild());
+  EXPECT_NO_THROW(scene.deformable(d).refit());
+  scene.deformable(d).indices().back() = {1, 3, 9};
+  EXPECT_THROW(scene.deformable(d).rebuild(), std::out_of_range) << "index past the vertices";
+  scene.remove_deformable(d);
+  EXPECT_THROW(scene.deformable(d), std::invalid_argument);
+}
+
+TEST(KinematicTree, ChildrenFollowTheirParents) {
+  TwoLevelScene scene;
+  const MeshHandle mesh = scene.add_rigid_mesh({{{-0.5f, -0.5f, 0}, {0.5f, -0.5f, 0}, {0, 0.5f, 0}}});
+  KinematicTree tree;
+  const int arm = tree.add_node(-1);
+  const int hand = tree.add_node(arm, glm::translate(glm::mat4(1.0f), glm::vec3(2, 0, 0)));
+  tree.attach(hand, scene.add_instance(mesh, glm::mat4(1.0f)));
+  // rotate the arm 90 degrees about z: the hand moves from x=2 to y=2
+  tree.set_local(arm, glm::rotate(glm::mat4(1.0f), glm::radians(90.0f), glm::vec3(0, 0, 1)));
+  tree.update(scene);
+  scene.commit();
+  EXPECT_TRUE(scene.intersect(Ray{{0, 2, -5}, {0, 0, 1}}).valid());
+  EXPECT_FALSE(scene.intersect(Ray{{2, 0, -5}, {0, 0, 1}}).valid());
+  EXPECT_THROW(tree.add_node(5), std::out_of_range);
+}
+
+}  // namespace
+}  // namespace artrace::core
