@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   artrace::tools::add_render_command(app);
   artrace::tools::add_bench_core_command(app);
+  artrace::tools::add_bench_dynamic_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

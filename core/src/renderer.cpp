@@ -48,33 +48,8 @@ glm::vec3 eye_light(const Triangle& tri, const glm::vec3& dir) {
 }
 
 Image render_eye_light(const KdTree& tree, const Camera& cam, const RenderOptions& opt) {
-  Image img(cam.width, cam.height);
   const auto& tris = tree.triangles();
-  for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
-    if (opt.packets) {
-      RayPacket rays;
-      HitPacket hits;
-      for (int y = t.y0; y < t.y1; y += 2) {
-        for (int x = t.x0; x < t.x1; x += 4) {
-          const LaneMask mask = primary_packet(cam, x, y, rays);
-          tree.intersect(rays, mask, hits);
-          for (int i = 0; i < kPacketSize; ++i) {
-            if (!((mask >> i) & 1u) || hits.prim[i] == kInvalidId) continue;
-            img.at(x + i % 4, y + i / 4) = eye_light(tris[hits.prim[i]], rays.get(i).dir);
-          }
-        }
-      }
-    } else {
-      for (int y = t.y0; y < t.y1; ++y) {
-        for (int x = t.x0; x < t.x1; ++x) {
-          const Ray r = cam.ray(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f);
-          const Hit h = tree.intersect(r);
-          if (h.valid()) img.at(x, y) = eye_light(tris[h.prim], r.dir);
-        }
-      }
-    }
-  });
-  return img;
+  return render_eye_light(tree, [&](const Hit& h) { return tris[h.prim]; }, cam, opt);
 }
 
 }  // namespace artrace::core

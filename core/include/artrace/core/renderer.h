@@ -41,11 +41,45 @@ struct RenderOptions {
   bool packets = true;  ///< trace 4x2 packets (else single rays)
 };
 
-/// Eye-light shading: brightness |cos| between the view ray and the surface, tinted by the
-/// normal's direction, so geometry can be looked at before materials exist. Background black.
-Image render_eye_light(const KdTree& tree, const Camera& cam, const RenderOptions& opt = {});
-
 /// Colour of an eye-light hit (shared by the packet and single-ray paths).
 glm::vec3 eye_light(const Triangle& tri, const glm::vec3& dir);
+
+/// Eye-light shading: brightness |cos| between the view ray and the surface, tinted by the
+/// normal's direction, so geometry can be looked at before materials exist. Background black.
+/// `Tracer` has intersect(Ray) and intersect(RayPacket, LaneMask, HitPacket&) (KdTree, Bvh,
+/// TwoLevelScene); `triangle_of(hit)` gives the world-space triangle a hit names.
+template <class Tracer, class TriangleOf>
+Image render_eye_light(const Tracer& tracer, const TriangleOf& triangle_of, const Camera& cam,
+                       const RenderOptions& opt = {}) {
+  Image img(cam.width, cam.height);
+  for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
+    if (opt.packets) {
+      RayPacket rays;
+      HitPacket hits;
+      for (int y = t.y0; y < t.y1; y += 2) {
+        for (int x = t.x0; x < t.x1; x += 4) {
+          const LaneMask mask = primary_packet(cam, x, y, rays);
+          tracer.intersect(rays, mask, hits);
+          for (int i = 0; i < kPacketSize; ++i) {
+            if (!((mask >> i) & 1u) || hits.prim[i] == kInvalidId) continue;
+            img.at(x + i % 4, y + i / 4) = eye_light(triangle_of(hits.get(i)), rays.get(i).dir);
+          }
+        }
+      }
+    } else {
+      for (int y = t.y0; y < t.y1; ++y) {
+        for (int x = t.x0; x < t.x1; ++x) {
+          const Ray r = cam.ray(static_cast<float>(x) + 0.5f, static_cast<float>(y) + 0.5f);
+          const Hit h = tracer.intersect(r);
+          if (h.valid()) img.at(x, y) = eye_light(triangle_of(h), r.dir);
+        }
+      }
+    }
+  });
+  return img;
+}
+
+/// The static kd-tree alone.
+Image render_eye_light(const KdTree& tree, const Camera& cam, const RenderOptions& opt = {});
 
 }  // namespace artrace::core
