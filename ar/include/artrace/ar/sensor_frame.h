@@ -1,0 +1,65 @@
+// One frame of an RGBD recording, as every reader delivers it, and the interface of the readers.
+#pragma once
+
+#include "artrace/ar/pinhole_intrinsics.h"
+
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace artrace::ar {
+
+/// 8-bit RGB, row-major, top row first, no padding.
+struct ColorImage {
+  int width = 0;
+  int height = 0;
+  std::vector<uint8_t> rgb;  ///< 3 bytes a pixel: R, G, B
+
+  bool empty() const { return width == 0 || height == 0; }
+  const uint8_t* at(int x, int y) const { return rgb.data() + 3 * (static_cast<size_t>(y) * width + x); }
+};
+
+/// Depth in metres along the optical axis; 0 marks a pixel without a reading (the sensor saw
+/// nothing there, or the value was invalid): never a made-up value.
+struct DepthImage {
+  int width = 0;
+  int height = 0;
+  std::vector<float> depth_m;
+
+  bool empty() const { return width == 0 || height == 0; }
+  float at(int x, int y) const { return depth_m[static_cast<size_t>(y) * width + x]; }
+  static bool valid(float d) { return d > 0.0f; }
+};
+
+struct SensorFrame {
+  ColorImage color;
+  DepthImage depth;
+  double color_time_s = 0.0;
+  double depth_time_s = 0.0;
+  PinholeIntrinsics color_intrinsics;
+  PinholeIntrinsics depth_intrinsics;
+  /// world-from-camera of the colour camera, when the recording (or a sidecar trajectory) has one
+  std::optional<Eigen::Isometry3d> world_from_camera;
+  int64_t index = 0;
+};
+
+/// Every reader: open in the constructor (throwing io::ParseError naming the file on bad input),
+/// then next / seek / rewind.
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  /// Number of frames when known up front.
+  virtual std::optional<int64_t> frame_count() const = 0;
+  /// The next frame; false at the end.
+  virtual bool next(SensorFrame& frame) = 0;
+  /// Positions the source so that next() returns frame `index` (0-based). Throws std::out_of_range.
+  virtual void seek(int64_t index) = 0;
+  void rewind() { seek(0); }
+  /// What the source reads, for messages and `artrace info`.
+  virtual std::string describe() const = 0;
+};
+
+}  // namespace artrace::ar

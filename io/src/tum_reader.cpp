@@ -1,0 +1,269 @@
+#include "artrace/io/tum_reader.h"
+#include "artrace/io/parse_error.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+namespace artrace::io {
+namespace {
+
+/// Splits a line into white-space separated words; empty for blank and '#' comment lines.
+std::vector<std::string> words(const std::string& line) {
+  std::vector<std::string> out;
+  std::istringstream in(line);
+  std::string w;
+  while (in >> w) {
+    if (w[0] == '#') break;
+    out.push_back(w);
+  }
+  return out;
+}
+
+double parse_number(const std::string& s, const std::filesystem::path& file, int line, const char* what) {
+  size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(s, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != s.size() || !std::isfinite(v)) {
+    throw ParseError(file.string(), line, 0, std::string("expected ") + what + ", got \"" + s + "\"");
+  }
+  return v;
+}
+
+std::ifstream open_text(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
+  return in;
+}
+
+}  // namespace
+
+std::vector<TimedFile> read_tum_list(const std::filesystem::path& path) {
+  std::ifstream in = open_text(path);
+  std::vector<TimedFile> out;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    const auto w = words(line);
+    if (w.empty()) continue;
+    if (w.size() != 2) {
+      throw ParseError(path.string(), n, 0, "expected 'timestamp filename', got " + std::to_string(w.size()) + " words");
+    }
+    const double t = parse_number(w[0], path, n, "a timestamp");
+    if (!out.empty() && !(t > out.back().time_s)) {
+      throw ParseError(path.string(), n, 0, "timestamp " + w[0] + " does not come after the previous one");
+    }
+    out.push_back({t, w[1]});
+  }
+  return out;
+}
+
+ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
+  std::ifstream in = open_text(path);
+  std::vector<ar::PoseSample> samples;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    const auto w = words(line);
+    if (w.empty()) continue;
+    if (w.size() != 8) {
+      throw ParseError(path.string(), n, 0, "expected 'timestamp tx ty tz qx qy qz qw', got " + std::to_string(w.size()) + " words");
+    }
+    double v[8];
+    for (int i = 0; i < 8; ++i) v[i] = parse_number(w[i], path, n, "a number");
+    ar::PoseSample s;
+    s.time_s = v[0];
+    s.translation = {v[1], v[2], v[3]};
+    s.rotation = Eigen::Quaterniond(v[7], v[4], v[5], v[6]);
+    if (std::fabs(s.rotation.norm() - 1.0) > 1e-3) {
+      throw ParseError(path.string(), n, 0, "quaternion has norm " + std::to_string(s.rotation.norm()) + ", not 1");
+    }
+    if (!samples.empty() && !(s.time_s > samples.back().time_s)) {
+      throw ParseError(path.string(), n, 0, "timestamp " + w[0] + " does not come after the previous one");
+    }
+    samples.push_back(s);
+  }
+  return ar::Trajectory(std::move(samples));
+}
+
+void write_tum_trajectory(const std::filesystem::path& path, const ar::Trajectory& trajectory) {
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  const std::filesystem::path tmp = path.string() + ".partial";
+  {
+    std::ofstream out(tmp);
+    out << "# timestamp tx ty tz qx qy qz qw\n" << std::setprecision(9);
+    for (const ar::PoseSample& s : trajectory.samples()) {
+      out << std::fixed << std::setprecision(6) << s.time_s << std::setprecision(9) << ' ' << s.translation.x() << ' '
+          << s.translation.y() << ' ' << s.translation.z() << ' ' << s.rotation.x() << ' ' << s.rotation.y() << ' '
+          << s.rotation.z() << ' ' << s.rotation.w() << '\n';
+    }
+    if (!out) throw std::runtime_error(path.string() + ": cannot write");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+std::vector<std::pair<size_t, size_t>> associate(const std::vector<TimedFile>& color,
+                                                 const std::vector<TimedFile>& depth, double max_dt_s) {
+  struct Candidate {
+    double dt;
+    size_t c, d;
+  };
+  std::vector<Candidate> cands;
+  size_t lo = 0;
+  for (size_t c = 0; c < color.size(); ++c) {
+    while (lo < depth.size() && depth[lo].time_s < color[c].time_s - max_dt_s) ++lo;
+    for (size_t d = lo; d < depth.size() && depth[d].time_s <= color[c].time_s + max_dt_s; ++d) {
+      cands.push_back({std::fabs(depth[d].time_s - color[c].time_s), c, d});
+    }
+  }
+  std::sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) {
+    return a.dt < b.dt || (a.dt == b.dt && (a.c < b.c || (a.c == b.c && a.d < b.d)));
+  });
+  std::vector<char> used_c(color.size(), 0), used_d(depth.size(), 0);
+  std::vector<std::pair<size_t, size_t>> out;
+  for (const Candidate& k : cands) {
+    if (used_c[k.c] || used_d[k.d]) continue;
+    used_c[k.c] = used_d[k.d] = 1;
+    out.push_back({k.c, k.d});
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+ar::PinholeIntrinsics freiburg_intrinsics(const std::string& name) {
+  auto has = [&](const char* s) { return name.find(s) != std::string::npos; };
+  if (has("freiburg1") || has("fr1")) return {640, 480, 517.3, 516.5, 318.6, 255.3};
+  if (has("freiburg2") || has("fr2")) return {640, 480, 520.9, 521.0, 325.1, 249.7};
+  if (has("freiburg3") || has("fr3")) return {640, 480, 535.4, 539.2, 320.1, 247.6};
+  return {640, 480, 525.0, 525.0, 319.5, 239.5};
+}
+
+TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& options)
+    : folder_(folder), options_(options) {
+  if (!std::filesystem::is_directory(folder)) throw ParseError(folder.string(), 0, 0, "not a folder");
+  const auto color = read_tum_list(folder / "rgb.txt");
+  const auto depth = read_tum_list(folder / "depth.txt");
+  if (color.empty()) throw ParseError((folder / "rgb.txt").string(), 0, 0, "lists no frames");
+  const auto pairs = associate(color, depth, options.max_dt_s);
+  if (pairs.size() < color.size()) {
+    std::cerr << "warning: " << folder.string() << ": " << color.size() - pairs.size()
+              << " colour frames have no depth frame within " << options.max_dt_s << " s and are skipped\n";
+  }
+  size_t missing = 0;
+  for (const auto& [c, d] : pairs) {
+    if (!std::filesystem::exists(folder / color[c].file) || !std::filesystem::exists(folder / depth[d].file)) {
+      if (++missing <= 3) {
+        std::cerr << "warning: " << folder.string() << ": frame " << color[c].file << " / " << depth[d].file
+                  << " is listed but missing, skipped\n";
+      }
+      continue;
+    }
+    frames_.push_back({color[c], depth[d]});
+  }
+  if (missing > 3) std::cerr << "warning: " << folder.string() << ": " << missing << " listed frames missing in all\n";
+  if (frames_.empty()) throw ParseError(folder.string(), 0, 0, "no frame has both a colour and a depth image");
+
+  if (options.trajectory) {
+    trajectory_ = read_tum_trajectory(*options.trajectory);
+  } else if (std::filesystem::exists(folder / "groundtruth.txt")) {
+    trajectory_ = read_tum_trajectory(folder / "groundtruth.txt");
+  }
+  if (options.intrinsics) {
+    intrinsics_ = *options.intrinsics;
+  } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
+    const std::filesystem::path p = folder / "intrinsics.txt";
+    std::ifstream in = open_text(p);
+    std::string line;
+    std::vector<std::string> w;
+    int n = 0;
+    while (w.empty() && std::getline(in, line)) {
+      ++n;
+      w = words(line);
+    }
+    if (w.size() != 4 && w.size() != 6) throw ParseError(p.string(), n, 0, "expected 'fx fy cx cy [width height]'");
+    intrinsics_.fx = parse_number(w[0], p, n, "fx");
+    intrinsics_.fy = parse_number(w[1], p, n, "fy");
+    intrinsics_.cx = parse_number(w[2], p, n, "cx");
+    intrinsics_.cy = parse_number(w[3], p, n, "cy");
+    if (w.size() == 6) {
+      intrinsics_.width = static_cast<int>(parse_number(w[4], p, n, "the width"));
+      intrinsics_.height = static_cast<int>(parse_number(w[5], p, n, "the height"));
+    }
+  } else {
+    intrinsics_ = freiburg_intrinsics(std::filesystem::absolute(folder).lexically_normal().string());
+  }
+}
+
+ar::SensorFrame TumReader::read(int64_t i) const {
+  if (i < 0 || i >= static_cast<int64_t>(frames_.size())) {
+    throw std::out_of_range(folder_.string() + ": frame " + std::to_string(i) + " of " + std::to_string(frames_.size()));
+  }
+  const Entry& e = frames_[static_cast<size_t>(i)];
+  ar::SensorFrame f;
+  f.index = i;
+  f.color_time_s = e.color.time_s;
+  f.depth_time_s = e.depth.time_s;
+  const std::filesystem::path cp = folder_ / e.color.file, dp = folder_ / e.depth.file;
+  const cv::Mat bgr = cv::imread(cp.string(), cv::IMREAD_COLOR);
+  if (bgr.empty()) throw ParseError(cp.string(), 0, 0, "cannot decode the colour image (missing, truncated or not an image)");
+  const cv::Mat raw = cv::imread(dp.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  if (raw.empty()) throw ParseError(dp.string(), 0, 0, "cannot decode the depth image (missing, truncated or not an image)");
+  if (raw.type() != CV_16UC1) {
+    throw ParseError(dp.string(), 0, 0, "depth PNG must be 16-bit with one channel, got OpenCV type " + std::to_string(raw.type()));
+  }
+  if (raw.cols != bgr.cols || raw.rows != bgr.rows) {
+    throw ParseError(dp.string(), 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
+                                            ", colour " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
+  }
+  f.color.width = bgr.cols;
+  f.color.height = bgr.rows;
+  f.color.rgb.resize(static_cast<size_t>(bgr.cols) * bgr.rows * 3);
+  cv::Mat rgb(bgr.rows, bgr.cols, CV_8UC3, f.color.rgb.data());
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  f.depth.width = raw.cols;
+  f.depth.height = raw.rows;
+  f.depth.depth_m.resize(static_cast<size_t>(raw.cols) * raw.rows);
+  const float scale = static_cast<float>(1.0 / options_.depth_scale);
+  for (int y = 0; y < raw.rows; ++y) {
+    const uint16_t* row = raw.ptr<uint16_t>(y);
+    float* out = f.depth.depth_m.data() + static_cast<size_t>(y) * raw.cols;
+    for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : row[x] * scale;
+  }
+  f.color_intrinsics = intrinsics_;
+  f.color_intrinsics.width = bgr.cols;
+  f.color_intrinsics.height = bgr.rows;
+  f.depth_intrinsics = f.color_intrinsics;  // TUM depth is registered to colour
+  if (!trajectory_.empty()) {
+    if (auto pose = trajectory_.at(e.color.time_s, options_.max_pose_gap_s)) f.world_from_camera = *pose;
+  }
+  return f;
+}
+
+bool TumReader::next(ar::SensorFrame& frame) {
+  if (cursor_ >= static_cast<int64_t>(frames_.size())) return false;
+  frame = read(cursor_++);
+  return true;
+}
+
+void TumReader::seek(int64_t index) {
+  if (index < 0 || index > static_cast<int64_t>(frames_.size())) {
+    throw std::out_of_range(folder_.string() + ": cannot seek to frame " + std::to_string(index) + " of " +
+                            std::to_string(frames_.size()));
+  }
+  cursor_ = index;
+}
+
+std::string TumReader::describe() const {
+  return "TUM RGB-D sequence " + folder_.string() + " (" + std::to_string(frames_.size()) + " frames" +
+         (trajectory_.empty() ? ", no trajectory" : ", with trajectory") + ")";
+}
+
+}  // namespace artrace::io
