@@ -1,0 +1,114 @@
+#include "artrace/io/parse_error.h"
+#include "artrace/io/recording.h"
+#include "artrace/io/tum_reader.h"
+#include "../test_util.h"
+
+#include <opencv2/imgcodecs.hpp>
+
+#include <fstream>
+
+namespace artrace::io {
+namespace {
+
+TEST(Tum, AssociationPairsNearestUniqueWithinTolerance) {
+  const std::vector<TimedFile> color{{1.000, "a"}, {1.033, "b"}, {1.066, "c"}, {1.100, "d"}};
+  const std::vector<TimedFile> depth{{0.990, "A"}, {1.040, "B"}, {1.200, "C"}};
+  const auto pairs = associate(color, depth, 0.02);
+  // 1.000-0.990 (10 ms) and 1.033-1.040 (7 ms); 1.066 is 26 ms from B, 1.100 100 ms from C
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0], std::make_pair(size_t(0), size_t(0)));
+  EXPECT_EQ(pairs[1], std::make_pair(size_t(1), size_t(1)));
+  // one depth frame between two colour frames goes to the nearer one only
+  const auto one = associate({{1.000, "a"}, {1.012, "b"}}, {{1.008, "A"}}, 0.02);
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_EQ(one[0].first, 1u);
+}
+
+TEST(Tum, TrajectoryInterpolatesBetweenSamples) {
+  ar::PoseSample a, b;
+  a.time_s = 10.0;
+  b.time_s = 11.0;
+  b.translation = {2.0, 0.0, -4.0};
+  b.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()));
+  const ar::Trajectory traj({a, b});
+  const auto p = traj.at(10.25, 2.0);
+  ASSERT_TRUE(p.has_value());
+  EXPECT_NEAR(p->translation().x(), 0.5, 1e-12);
+  EXPECT_NEAR(p->translation().z(), -1.0, 1e-12);
+  const Eigen::AngleAxisd aa(p->rotation());
+  EXPECT_NEAR(aa.angle(), M_PI / 8, 1e-9) << "slerp: a quarter of 90 degrees";
+  EXPECT_NEAR(std::fabs(aa.axis().z()), 1.0, 1e-9);
+  EXPECT_FALSE(traj.at(10.5, 0.5).has_value()) << "samples 1 s apart are a gap at max 0.5 s";
+  EXPECT_FALSE(traj.at(9.0, 2.0).has_value()) << "before the first sample";
+  EXPECT_TRUE(traj.at(11.0).has_value()) << "exactly on a sample";
+}
+
+/// A small sequence written here: values, association, poses at colour timestamps.
+TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_tum_ok";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "rgb");
+  std::filesystem::create_directories(dir / "depth");
+  std::ofstream rgb(dir / "rgb.txt"), dep(dir / "depth.txt"), gt(dir / "groundtruth.txt");
+  rgb << "# colour\n";
+  for (int k = 0; k < 3; ++k) {
+    const double tc = 100.0 + 0.1 * k, td = tc + 0.004;
+    rgb << std::fixed << tc << " rgb/" << k << ".png\n";
+    dep << std::fixed << td << " depth/" << k << ".png\n";
+    cv::Mat c(4, 5, CV_8UC3, cv::Scalar(10 * k, 20, 30));  // BGR
+    cv::Mat d(4, 5, CV_16UC1, cv::Scalar(5000 * (k + 1)));
+    d.at<uint16_t>(1, 1) = 0;
+    d.at<uint16_t>(2, 2) = 65535;
+    cv::imwrite((dir / "rgb" / (std::to_string(k) + ".png")).string(), c);
+    cv::imwrite((dir / "depth" / (std::to_string(k) + ".png")).string(), d);
+  }
+  gt << "99.95 0 0 0 0 0 0 1\n100.25 3 0 0 0 0 0 1\n";
+  rgb.close();
+  dep.close();
+  gt.close();
+  TumOptions options;
+  options.max_pose_gap_s = 0.5;  // the two samples are 0.3 s apart
+  TumReader reader(dir, options);
+  ASSERT_EQ(reader.frame_count().value(), 3);
+  ar::SensorFrame f;
+  for (int k = 0; k < 3; ++k) {
+    ASSERT_TRUE(reader.next(f));
+    EXPECT_FLOAT_EQ(f.depth.at(0, 0), static_cast<float>(k + 1));
+    EXPECT_EQ(f.depth.at(1, 1), 0.0f) << "no reading";
+    EXPECT_EQ(f.depth.at(2, 2), 0.0f) << "saturated 65535 is no reading either";
+    EXPECT_EQ(f.color.at(0, 0)[0], 30) << "RGB order";
+    EXPECT_EQ(f.color.at(0, 0)[2], 10 * k);
+    ASSERT_TRUE(f.world_from_camera.has_value());
+    // linear between (99.95, x=0) and (100.25, x=3): x = 10 (t - 99.95)
+    EXPECT_NEAR(f.world_from_camera->translation().x(), 10.0 * (100.0 + 0.1 * k - 99.95), 1e-6);
+    EXPECT_EQ(f.color_intrinsics.fx, 525.0) << "no name, no intrinsics.txt: the ROS default";
+  }
+  EXPECT_FALSE(reader.next(f));
+  reader.seek(1);
+  ASSERT_TRUE(reader.next(f));
+  EXPECT_EQ(f.index, 1);
+  std::filesystem::remove_all(dir);
+}
+
+/// Every reader over every broken input: a ParseError naming the file, never a crash.
+TEST(BrokenInputs, EveryReaderRefusesEveryBrokenInputWithTheFileNamed) {
+  const std::filesystem::path root = std::filesystem::path(ARTRACE_SOURCE_DIR) / "tests/data/broken";
+  int checked = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(root)) {
+    if (entry.path().filename() == "README.md") continue;
+    ++checked;
+    try {
+      auto source = open_recording(entry.path());
+      ar::SensorFrame f;
+      while (source->next(f)) {
+      }
+      ADD_FAILURE() << entry.path() << " was read without complaint";
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find(entry.path().string()), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_GE(checked, 10);
+}
+
+}  // namespace
+}  // namespace artrace::io
