@@ -31,8 +31,9 @@ core::Camera make_camera(const PinholeIntrinsics& k, const Eigen::Isometry3d& wo
   c.height = k.height;
   c.fx = static_cast<float>(k.fx);
   c.fy = static_cast<float>(k.fy);
-  c.cx = static_cast<float>(k.cx);
-  c.cy = static_cast<float>(k.cy);
+  // OpenCV puts the centre of pixel x at x; the renderer at x + 0.5.
+  c.cx = static_cast<float>(k.cx + 0.5);
+  c.cy = static_cast<float>(k.cy + 0.5);
   const Eigen::Vector3d t = world_from_camera.translation();
   const Eigen::Matrix3d r = world_from_camera.rotation();
   c.position = glm::vec3(t.x(), t.y(), t.z());

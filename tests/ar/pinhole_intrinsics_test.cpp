@@ -20,7 +20,7 @@ TEST(PinholeIntrinsics, CameraRaysPassThroughUnprojectedPoints) {
   pose.pretranslate(Eigen::Vector3d(1.0, -2.0, 0.5));
   const core::Camera cam = make_camera(k, pose);
   const Eigen::Vector3d world = pose * k.unproject(100.0, 50.0, 3.0);
-  const glm::vec3 d = cam.direction(100.0f, 50.0f);  // z component 1 in camera space: t = depth
+  const glm::vec3 d = cam.direction(100.5f, 50.5f);  // centre of pixel (100, 50); camera-space z = 1: t = depth
   const glm::vec3 p = cam.position + 3.0f * d;
   EXPECT_NEAR(p.x, world.x(), 1e-5);
   EXPECT_NEAR(p.y, world.y(), 1e-5);

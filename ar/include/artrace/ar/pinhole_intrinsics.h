@@ -7,7 +7,8 @@
 
 namespace artrace::ar {
 
-/// Pinhole intrinsics in pixels, OpenCV convention (x right, y down, z forward).
+/// Pinhole intrinsics in pixels, OpenCV convention (x right, y down, z forward; the centre of pixel
+/// (x, y) is at (x, y), whereas core::Camera puts it at (x + 0.5, y + 0.5)).
 struct PinholeIntrinsics {
   int width = 0;
   int height = 0;

@@ -1,0 +1,154 @@
+// Commands on recordings: synth, convert, info, bench-io.
+#include "bench_util.h"
+#include "commands.h"
+
+#include "artrace/io/aff_scene.h"
+#include "artrace/io/oni_file.h"
+#include "artrace/io/parse_error.h"
+#include "artrace/io/recording.h"
+#include "artrace/io/recording_writer.h"
+#include "artrace/io/synth.h"
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+
+namespace artrace::tools {
+namespace {
+
+nlohmann::json intrinsics_json(const ar::PinholeIntrinsics& k) {
+  return {{"width", k.width}, {"height", k.height}, {"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}};
+}
+
+nlohmann::json info_recording(const std::filesystem::path& path) {
+  auto src = io::open_recording(path);
+  ar::SensorFrame first;
+  nlohmann::json j;
+  j["kind"] = "recording";
+  j["source"] = src->describe();
+  j["frames"] = src->frame_count().value_or(-1);
+  if (!src->next(first)) throw io::ParseError(path.string(), 0, 0, "holds no frame");
+  j["width"] = first.color.width;
+  j["height"] = first.color.height;
+  j["depth_width"] = first.depth.width;
+  j["depth_height"] = first.depth.height;
+  j["color_intrinsics"] = intrinsics_json(first.color_intrinsics);
+  j["first_time_s"] = first.color_time_s;
+  j["has_pose"] = first.world_from_camera.has_value();
+  if (const auto n = src->frame_count(); n && *n > 1) {
+    src->seek(*n - 1);
+    ar::SensorFrame last;
+    if (src->next(last)) j["duration_s"] = last.color_time_s - first.color_time_s;
+  }
+  return j;
+}
+
+nlohmann::json info_aff(const std::filesystem::path& path) {
+  const io::AffScene s = io::load_aff(path);
+  nlohmann::json j;
+  j["kind"] = "aff scene";
+  j["triangles"] = s.triangle_count();
+  j["static_triangles"] = s.static_triangle_count();
+  j["animated_nodes"] = s.nodes.size() - 1;
+  j["animations"] = s.animations.size();
+  j["lights"] = s.lights.size();
+  j["materials"] = s.materials.size();
+  j["textures"] = s.textures.size();
+  j["frames"] = s.anim_frames;
+  j["time_range"] = {s.anim_start, s.anim_end};
+  if (s.view) {
+    j["width"] = s.view->width;
+    j["height"] = s.view->height;
+  }
+  return j;
+}
+
+}  // namespace
+
+void add_recording_commands(CLI::App& app) {
+  {
+    struct Options {
+      std::string scene, output;
+      io::SynthOptions synth;
+      bool kinect = false;
+    };
+    auto opt = std::make_shared<Options>();
+    CLI::App* cmd = app.add_subcommand("synth", "Render a synthetic RGBD recording (exact depth and poses) from a scene");
+    cmd->add_option("--scene", opt->scene, "AFF scene (BART, or the project's data/scenes/room.aff)")->required()->check(CLI::ExistingFile);
+    cmd->add_option("-o,--output", opt->output, "TUM folder, or a file ending in .oni")->required();
+    cmd->add_option("--frames", opt->synth.frames, "number of frames")->capture_default_str()->check(CLI::Range(1, 100000));
+    cmd->add_option("--fps", opt->synth.fps, "frame rate")->capture_default_str()->check(CLI::Range(1, 1000));
+    cmd->add_option("--width", opt->synth.width, "image width")->capture_default_str()->check(CLI::Range(8, 4096));
+    cmd->add_option("--height", opt->synth.height, "image height")->capture_default_str()->check(CLI::Range(8, 4096));
+    cmd->add_option("--fov", opt->synth.fov_y_deg, "vertical field of view in degrees")->capture_default_str();
+    cmd->add_option("--orbit", opt->synth.orbit_deg, "degrees the camera orbits over the clip (scenes without a camera track)")->capture_default_str();
+    cmd->add_flag("--kinect", opt->kinect, "apply the Kinect-like depth model (noise, quantisation, holes, offset)");
+    cmd->add_option("--seed", opt->synth.seed, "seed of the depth model")->capture_default_str();
+    cmd->add_option("--threads", opt->synth.threads, "worker threads (0 = all cores)")->capture_default_str();
+    cmd->callback([opt] {
+      if (opt->kinect) opt->synth.depth_model = ar::DepthModel{};
+      const io::AffScene scene = io::load_aff(opt->scene);
+      io::Synthesizer synth(scene, opt->synth);
+      auto writer = io::make_recording_writer(opt->output, opt->synth.fps);
+      const auto t0 = std::chrono::steady_clock::now();
+      const int n = synth.write(*writer);
+      std::printf("%s: %d frames %dx%d (%s depth) in %.2f s\n", opt->output.c_str(), n, opt->synth.width,
+                  opt->synth.height, opt->kinect ? "Kinect-like" : "exact", ms_since(t0) / 1000.0);
+    });
+  }
+  {
+    auto src = std::make_shared<std::string>();
+    auto dst = std::make_shared<std::string>();
+    CLI::App* cmd = app.add_subcommand("convert", "Convert a recording (TUM folder or .oni) to .oni or the TUM layout");
+    cmd->add_option("source", *src, "TUM folder or .oni file")->required();
+    cmd->add_option("-o,--output", *dst, "TUM folder, or a file ending in .oni")->required();
+    cmd->callback([src, dst] {
+      auto in = io::open_recording(*src);
+      auto out = io::make_recording_writer(*dst);
+      ar::SensorFrame f;
+      int n = 0;
+      while (in->next(f)) {
+        out->write(f);
+        ++n;
+      }
+      out->close();
+      std::printf("%s: %d frames from %s\n", dst->c_str(), n, in->describe().c_str());
+    });
+  }
+  {
+    auto path = std::make_shared<std::string>();
+    auto json = std::make_shared<std::string>();
+    CLI::App* cmd = app.add_subcommand("info", "What a recording, AFF scene or ONI file holds, or why it cannot be read");
+    cmd->add_option("path", *path, "TUM folder, .oni file or .aff scene")->required();
+    cmd->add_option("--json", *json, "also write the answer as JSON");
+    cmd->callback([path, json] {
+      const std::filesystem::path p(*path);
+      const nlohmann::json j = p.extension() == ".aff" ? info_aff(p) : info_recording(p);
+      std::cout << *path << "\n";
+      for (const auto& [key, value] : j.items()) std::cout << "  " << key << ": " << value.dump() << "\n";
+      write_json(*json, j);
+    });
+  }
+  {
+    auto src = std::make_shared<std::string>();
+    auto json = std::make_shared<std::string>();
+    CLI::App* cmd = app.add_subcommand("bench-io", "Frames per second a recording is delivered at, decoding included");
+    cmd->add_option("source", *src, "TUM folder or .oni file")->required();
+    cmd->add_option("--json", *json, "write the result as JSON");
+    cmd->callback([src, json] {
+      auto in = io::open_recording(*src);
+      ar::SensorFrame f;
+      in->next(f);  // warm-up: first frame, file caches
+      in->rewind();
+      const auto t0 = std::chrono::steady_clock::now();
+      int n = 0;
+      while (in->next(f)) ++n;
+      const double s = ms_since(t0) / 1000.0;
+      const double fps = s > 0.0 ? n / s : 0.0;
+      std::printf("%s: %d frames in %.3f s = %.1f frames/s\n", src->c_str(), n, s, fps);
+      write_json(*json, {{"source", *src}, {"frames", n}, {"seconds", s}, {"fps", fps}});
+    });
+  }
+}
+
+}  // namespace artrace::tools
