@@ -3,7 +3,9 @@
 #include "commands.h"
 
 #include "artrace/io/aff_scene.h"
+#include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
+#include "artrace/io/tum_reader.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/recording.h"
 #include "artrace/io/recording_writer.h"
@@ -113,6 +115,36 @@ void add_recording_commands(CLI::App& app) {
       }
       out->close();
       std::printf("%s: %d frames from %s\n", dst->c_str(), n, in->describe().c_str());
+    });
+  }
+  {
+    struct Options {
+      std::string source, output, json;
+      io::OdometryOptions odometry;
+    };
+    auto opt = std::make_shared<Options>();
+    CLI::App* cmd = app.add_subcommand("track", "Estimate the camera trajectory of a recording with RGB-D odometry");
+    cmd->add_option("source", opt->source, "TUM folder or .oni file")->required();
+    cmd->add_option("-o,--output", opt->output, "trajectory file to write (TUM format)")->required();
+    cmd->add_option("--method", opt->odometry.method, "RgbdICPOdometry, RgbdOdometry or ICPOdometry")->capture_default_str();
+    cmd->add_option("--frames", opt->odometry.max_frames, "frames to track (0 = all)")->capture_default_str();
+    cmd->add_option("--json", opt->json, "write the drift report as JSON");
+    cmd->callback([opt] {
+      auto in = io::open_recording(opt->source);
+      const auto t0 = std::chrono::steady_clock::now();
+      const io::OdometryResult r = io::estimate_trajectory(*in, opt->odometry);
+      const double s = ms_since(t0) / 1000.0;
+      io::write_tum_trajectory(opt->output, r.trajectory);
+      std::printf("%s: %zu poses in %.2f s (%.1f frames/s), %d odometry failures\n", opt->output.c_str(),
+                  r.trajectory.size(), s, r.trajectory.size() / std::max(s, 1e-9), r.failures);
+      nlohmann::json j{{"frames", r.trajectory.size()}, {"failures", r.failures}, {"seconds", s}};
+      if (!r.reference.empty()) {
+        const io::DriftReport d = io::compare_trajectories(r.trajectory, r.reference);
+        std::printf("  drift against the recording's poses: RMS %.4f m, final %.4f m and %.3f deg over %d frames\n",
+                    d.rms_m, d.final_m, d.final_deg, d.compared);
+        j["drift"] = {{"rms_m", d.rms_m}, {"final_m", d.final_m}, {"final_deg", d.final_deg}, {"compared", d.compared}};
+      }
+      write_json(opt->json, j);
     });
   }
   {
