@@ -112,3 +112,29 @@ TEST(BrokenInputs, EveryReaderRefusesEveryBrokenInputWithTheFileNamed) {
 
 }  // namespace
 }  // namespace artrace::io
+
+namespace artrace::io {
+namespace {
+
+/// Real TUM sequences, when the shared data holds any (../shared/data/rgbd/<sequence>/).
+TEST(Tum, RealSequencesInSharedData) {
+  ARTRACE_REQUIRE_SHARED("rgbd");
+  int sequences = 0;
+  for (const auto& e : std::filesystem::directory_iterator(shared_path)) {
+    if (!std::filesystem::exists(e.path() / "rgb.txt")) continue;
+    ++sequences;
+    TumReader reader(e.path());
+    ar::SensorFrame f;
+    for (int k = 0; k < 10 && reader.next(f); ++k) {
+      EXPECT_EQ(f.color.width, 640);
+      EXPECT_EQ(f.depth.height, 480);
+      size_t valid = 0;
+      for (const float d : f.depth.depth_m) valid += d > 0.2f && d < 10.0f;
+      EXPECT_GT(valid, f.depth.depth_m.size() / 4) << e.path();
+    }
+  }
+  if (sequences == 0) GTEST_SKIP() << "no TUM sequence in " << shared_path;
+}
+
+}  // namespace
+}  // namespace artrace::io

@@ -1,0 +1,48 @@
+// Plain OpenCV sources: a folder holding depth/ (16-bit PNGs, `depth_per_metre` units, 1000 = mm by
+// default) and either color/ (images, any format OpenCV reads) or one colour video color.<ext>
+// (mp4, avi, mkv, mov). Frames pair by sorted file name / video order; frame k is at k / fps seconds.
+// Optional: trajectory.txt (TUM format, poses at those times) and intrinsics.txt (fx fy cx cy).
+#pragma once
+
+#include "artrace/ar/sensor_frame.h"
+#include "artrace/ar/trajectory.h"
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace artrace::io {
+
+struct ImageFolderOptions {
+  double fps = 30.0;  ///< for image folders; a video's own rate wins
+  double depth_per_metre = 1000.0;
+  std::optional<ar::PinholeIntrinsics> intrinsics;
+};
+
+class ImageFolderReader : public ar::FrameSource {
+ public:
+  explicit ImageFolderReader(const std::filesystem::path& folder, const ImageFolderOptions& options = {});
+  ~ImageFolderReader() override;
+
+  std::optional<int64_t> frame_count() const override { return static_cast<int64_t>(depth_files_.size()); }
+  bool next(ar::SensorFrame& frame) override;
+  void seek(int64_t index) override;
+  std::string describe() const override;
+
+  /// True when `folder` looks like this layout.
+  static bool accepts(const std::filesystem::path& folder);
+
+ private:
+  struct Video;
+  std::filesystem::path folder_;
+  ImageFolderOptions options_;
+  std::vector<std::filesystem::path> color_files_, depth_files_;
+  std::filesystem::path video_path_;
+  std::unique_ptr<Video> video_;
+  ar::Trajectory trajectory_;
+  std::optional<ar::PinholeIntrinsics> intrinsics_;
+  int64_t cursor_ = 0;
+};
+
+}  // namespace artrace::io

@@ -1,0 +1,157 @@
+#include "artrace/io/image_folder_reader.h"
+#include "artrace/io/parse_error.h"
+#include "artrace/io/tum_reader.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+namespace artrace::io {
+namespace {
+
+const char* const kVideoExtensions[] = {".mp4", ".avi", ".mkv", ".mov"};
+
+std::filesystem::path find_video(const std::filesystem::path& folder) {
+  for (const char* ext : kVideoExtensions) {
+    const auto p = folder / (std::string("color") + ext);
+    if (std::filesystem::exists(p)) return p;
+  }
+  return {};
+}
+
+std::vector<std::filesystem::path> sorted_files(const std::filesystem::path& dir) {
+  std::vector<std::filesystem::path> out;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    if (e.is_regular_file() && e.path().filename().string()[0] != '.') out.push_back(e.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+}  // namespace
+
+struct ImageFolderReader::Video {
+  cv::VideoCapture cap;
+  int64_t position = 0;
+};
+
+bool ImageFolderReader::accepts(const std::filesystem::path& folder) {
+  return std::filesystem::is_directory(folder / "depth") &&
+         (std::filesystem::is_directory(folder / "color") || !find_video(folder).empty());
+}
+
+ImageFolderReader::ImageFolderReader(const std::filesystem::path& folder, const ImageFolderOptions& options)
+    : folder_(folder), options_(options) {
+  if (!accepts(folder)) throw ParseError(folder.string(), 0, 0, "needs depth/ and color/ (or a color.mp4 video)");
+  depth_files_ = sorted_files(folder / "depth");
+  if (depth_files_.empty()) throw ParseError((folder / "depth").string(), 0, 0, "holds no depth image");
+  video_path_ = find_video(folder);
+  if (std::filesystem::is_directory(folder / "color")) video_path_.clear();
+  if (video_path_.empty()) {
+    color_files_ = sorted_files(folder / "color");
+    if (color_files_.size() != depth_files_.size()) {
+      throw ParseError(folder.string(), 0, 0, "color/ has " + std::to_string(color_files_.size()) +
+                                                  " images, depth/ " + std::to_string(depth_files_.size()));
+    }
+  } else {
+    video_ = std::make_unique<Video>();
+    if (!video_->cap.open(video_path_.string())) throw ParseError(video_path_.string(), 0, 0, "OpenCV cannot open the video");
+    const double fps = video_->cap.get(cv::CAP_PROP_FPS);
+    if (fps > 0.0) options_.fps = fps;
+  }
+  if (std::filesystem::exists(folder / "trajectory.txt")) trajectory_ = read_tum_trajectory(folder / "trajectory.txt");
+  if (options.intrinsics) {
+    intrinsics_ = options.intrinsics;
+  } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
+    std::ifstream in(folder / "intrinsics.txt");
+    std::string line;
+    while (std::getline(in, line)) {
+      if (line.empty() || line[0] == '#') continue;
+      std::istringstream ss(line);
+      ar::PinholeIntrinsics k;
+      if (!(ss >> k.fx >> k.fy >> k.cx >> k.cy)) {
+        throw ParseError((folder / "intrinsics.txt").string(), 0, 0, "expected 'fx fy cx cy'");
+      }
+      intrinsics_ = k;
+      break;
+    }
+  }
+}
+
+ImageFolderReader::~ImageFolderReader() = default;
+
+bool ImageFolderReader::next(ar::SensorFrame& f) {
+  if (cursor_ >= static_cast<int64_t>(depth_files_.size())) return false;
+  cv::Mat bgr;
+  std::string color_name;
+  if (video_) {
+    color_name = video_path_.string() + " frame " + std::to_string(cursor_);
+    if (!video_->cap.read(bgr) || bgr.empty()) {
+      throw ParseError(video_path_.string(), 0, 0, "video ends at frame " + std::to_string(cursor_) + ", before the depth images do");
+    }
+    ++video_->position;
+  } else {
+    color_name = color_files_[static_cast<size_t>(cursor_)].string();
+    bgr = cv::imread(color_name, cv::IMREAD_COLOR);
+    if (bgr.empty()) throw ParseError(color_name, 0, 0, "cannot decode the colour image");
+  }
+  const std::string depth_name = depth_files_[static_cast<size_t>(cursor_)].string();
+  const cv::Mat raw = cv::imread(depth_name, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  if (raw.empty()) throw ParseError(depth_name, 0, 0, "cannot decode the depth image");
+  if (raw.type() != CV_16UC1) throw ParseError(depth_name, 0, 0, "depth PNG must be 16-bit with one channel");
+  f = ar::SensorFrame{};
+  f.index = cursor_;
+  f.color_time_s = f.depth_time_s = static_cast<double>(cursor_) / options_.fps;
+  f.color.width = bgr.cols;
+  f.color.height = bgr.rows;
+  f.color.rgb.resize(static_cast<size_t>(bgr.cols) * bgr.rows * 3);
+  cv::Mat rgb(bgr.rows, bgr.cols, CV_8UC3, f.color.rgb.data());
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  f.depth.width = raw.cols;
+  f.depth.height = raw.rows;
+  f.depth.depth_m.resize(static_cast<size_t>(raw.cols) * raw.rows);
+  const float scale = static_cast<float>(1.0 / options_.depth_per_metre);
+  for (int y = 0; y < raw.rows; ++y) {
+    const uint16_t* row = raw.ptr<uint16_t>(y);
+    for (int x = 0; x < raw.cols; ++x) {
+      f.depth.depth_m[static_cast<size_t>(y) * raw.cols + x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : row[x] * scale;
+    }
+  }
+  ar::PinholeIntrinsics k = intrinsics_.value_or(
+      ar::PinholeIntrinsics{bgr.cols, bgr.rows, 525.0 * bgr.cols / 640.0, 525.0 * bgr.cols / 640.0, 0.5 * bgr.cols - 0.5, 0.5 * bgr.rows - 0.5});
+  k.width = bgr.cols;
+  k.height = bgr.rows;
+  f.color_intrinsics = f.depth_intrinsics = k;
+  if (!trajectory_.empty()) {
+    if (auto pose = trajectory_.at(f.color_time_s)) f.world_from_camera = *pose;
+  }
+  ++cursor_;
+  return true;
+}
+
+void ImageFolderReader::seek(int64_t index) {
+  if (index < 0 || index > static_cast<int64_t>(depth_files_.size())) {
+    throw std::out_of_range(folder_.string() + ": cannot seek to frame " + std::to_string(index));
+  }
+  if (video_) {
+    // CAP_PROP_POS_FRAMES is not frame-accurate for every codec: reopen and step instead.
+    if (index < video_->position) {
+      video_->cap.open(video_path_.string());
+      video_->position = 0;
+    }
+    cv::Mat skip;
+    while (video_->position < index && video_->cap.grab()) ++video_->position;
+  }
+  cursor_ = index;
+}
+
+std::string ImageFolderReader::describe() const {
+  return std::string(video_ ? "colour video + depth images " : "colour/depth image folder ") + folder_.string() +
+         " (" + std::to_string(depth_files_.size()) + " frames)";
+}
+
+}  // namespace artrace::io

@@ -1,0 +1,71 @@
+#include "artrace/io/image_folder_reader.h"
+#include "artrace/io/parse_error.h"
+#include "artrace/io/recording.h"
+#include "../test_util.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <fstream>
+
+namespace artrace::io {
+namespace {
+
+std::filesystem::path make_folder(const std::string& name, bool video, int frames) {
+  const auto dir = std::filesystem::temp_directory_path() / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "depth");
+  if (!video) std::filesystem::create_directories(dir / "color");
+  cv::VideoWriter writer;
+  if (video) writer.open((dir / "color.avi").string(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 15.0, cv::Size(32, 24));
+  for (int k = 0; k < frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%03d.png", k);
+    const cv::Mat c(24, 32, CV_8UC3, cv::Scalar(20 * k, 100, 200));  // BGR
+    if (video) writer.write(c);
+    else cv::imwrite((dir / "color" / name).string(), c);
+    cv::Mat d(24, 32, CV_16UC1, cv::Scalar(1000 + 100 * k));
+    cv::imwrite((dir / "depth" / name).string(), d);
+  }
+  return dir;
+}
+
+TEST(ImageFolder, ImagePairsInOrderWithDepthInMetres) {
+  const auto dir = make_folder("artrace_imgfolder", false, 4);
+  std::ofstream(dir / "intrinsics.txt") << "# fx fy cx cy\n30 31 15.5 11.5\n";
+  auto src = open_recording(dir);
+  EXPECT_EQ(src->frame_count().value(), 4);
+  ar::SensorFrame f;
+  for (int k = 0; k < 4; ++k) {
+    ASSERT_TRUE(src->next(f));
+    EXPECT_FLOAT_EQ(f.depth.at(5, 5), 1.0f + 0.1f * k);
+    EXPECT_EQ(f.color.at(0, 0)[2], 20 * k) << "blue, from BGR";
+    EXPECT_DOUBLE_EQ(f.color_time_s, k / 30.0);
+    EXPECT_EQ(f.color_intrinsics.fy, 31.0);
+  }
+  EXPECT_FALSE(src->next(f));
+  src->seek(2);
+  ASSERT_TRUE(src->next(f));
+  EXPECT_FLOAT_EQ(f.depth.at(0, 0), 1.2f);
+  std::filesystem::remove(dir / "color" / "003.png");
+  EXPECT_THROW(open_recording(dir), ParseError) << "3 colour images for 4 depth images";
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ImageFolder, ColourVideoWithDepthImagesSeeksFrameAccurately) {
+  const auto dir = make_folder("artrace_vidfolder", true, 6);
+  auto src = open_recording(dir);
+  ASSERT_EQ(src->frame_count().value(), 6);
+  ar::SensorFrame f;
+  for (const int k : {4, 1, 5, 0}) {
+    src->seek(k);
+    ASSERT_TRUE(src->next(f));
+    EXPECT_NEAR(f.color.at(10, 10)[2], 20 * k, 12) << "frame " << k << " (MJPEG is lossy)";
+    EXPECT_FLOAT_EQ(f.depth.at(0, 0), 1.0f + 0.1f * k);
+    EXPECT_DOUBLE_EQ(f.color_time_s, k / 15.0) << "the video's own rate";
+  }
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace artrace::io
