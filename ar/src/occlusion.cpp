@@ -6,31 +6,58 @@
 
 namespace artrace::ar {
 
-DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes) {
+DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px) {
   DepthImage cur = depth;
   const int w = depth.width, h = depth.height;
+  // Only small holes are filled: a large region without readings (beyond the sensor's range, a
+  // window, a black surface) says nothing about what is there, and filling it from its rim would
+  // grow whatever surrounds it.
+  std::vector<uint8_t> fillable(static_cast<size_t>(w) * h, 0);
+  std::vector<int32_t> component;
+  std::vector<uint8_t> seen(fillable.size(), 0);
+  for (size_t start = 0; start < fillable.size(); ++start) {
+    if (seen[start] || depth.depth_m[start] > 0.0f) continue;
+    component.clear();
+    component.push_back(static_cast<int32_t>(start));
+    seen[start] = 1;
+    for (size_t k = 0; k < component.size(); ++k) {
+      const int x = component[k] % w, y = component[k] / w;
+      const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+      for (int n = 0; n < 4; ++n) {
+        if (nx[n] < 0 || ny[n] < 0 || nx[n] >= w || ny[n] >= h) continue;
+        const size_t j = static_cast<size_t>(ny[n]) * w + nx[n];
+        if (seen[j] || depth.depth_m[j] > 0.0f) continue;
+        seen[j] = 1;
+        component.push_back(static_cast<int32_t>(j));
+      }
+    }
+    if (static_cast<int>(component.size()) <= max_hole_px) {
+      for (const int32_t i : component) fillable[static_cast<size_t>(i)] = 1;
+    }
+  }
   std::vector<float> window;
   for (int pass = 0; pass < passes; ++pass) {
     DepthImage next = cur;
     bool changed = false;
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
-        if (cur.at(x, y) > 0.0f) continue;
+        const size_t i = static_cast<size_t>(y) * w + x;
+        if (cur.depth_m[i] > 0.0f || !fillable[i]) continue;
         window.clear();
-        int seen = 0;
         for (int dy = -radius; dy <= radius; ++dy) {
           for (int dx = -radius; dx <= radius; ++dx) {
             const int xx = x + dx, yy = y + dy;
             if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-            ++seen;
             const float v = cur.at(xx, yy);
             if (v > 0.0f) window.push_back(v);
           }
         }
-        // at least a quarter of the window must be valid: a large hole stays unknown
-        if (window.size() * 4 < static_cast<size_t>(seen)) continue;
-        std::nth_element(window.begin(), window.begin() + window.size() / 2, window.end());
-        next.depth_m[static_cast<size_t>(y) * w + x] = window[window.size() / 2];
+        if (window.empty()) continue;
+        // Holes cluster at silhouettes on the background side (the sensor's shadow): lean towards
+        // the far values of the neighbourhood rather than its median.
+        const size_t pick = window.size() * 3 / 4;
+        std::nth_element(window.begin(), window.begin() + pick, window.end());
+        next.depth_m[i] = window[pick];
         changed = true;
       }
     }
@@ -43,7 +70,7 @@ DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes) {
 std::vector<float> occlusion_alpha(const DepthImage& sensor, const ColorImage& color, const std::vector<float>& zv,
                                    const OcclusionOptions& opt) {
   const int w = sensor.width, h = sensor.height;
-  const DepthImage filled = fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes);
+  const DepthImage filled = fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes, opt.max_hole_px);
   std::vector<float> alpha(static_cast<size_t>(w) * h, 0.0f);
   for (size_t i = 0; i < alpha.size(); ++i) {
     if (!std::isfinite(zv[i])) continue;

@@ -3,8 +3,8 @@
 // A per-pixel `z_real < z_virtual` test fails on real depth maps: holes (no reading) punch holes
 // into real occluders, noise makes the boundary flicker, and depth edges sit a pixel or two away
 // from the colour edges the eye sees. Here:
-//   1. holes are filled from the median of the valid depths around them (a few growing passes);
-//      what stays unknown does not hide anything;
+//   1. small holes are filled from the valid depths around them (a few growing passes); large
+//      ones stay unknown, and what is unknown does not hide anything;
 //   2. the virtual surface's visibility is soft: alpha = clamp(0.5 + (z_real - z_virtual) / (2 b))
 //      with a band b that grows with the sensor's noise, b = k (1.2 mm + 1.9 mm (z - 0.4 m)^2)
 //      (Nguyen, Izadi & Lovell, 3DIMPVT 2012), so noise shifts alpha a little instead of toggling it;
@@ -23,6 +23,7 @@ namespace artrace::ar {
 struct OcclusionOptions {
   int fill_radius = 2;          ///< window radius of the hole filling median
   int fill_passes = 4;          ///< holes up to about radius x passes pixels across are filled
+  int max_hole_px = 64;         ///< larger connected holes stay unknown (they hide nothing)
   double band_sigmas = 3.0;     ///< k: band width in multiples of the noise sigma
   double min_band_m = 0.005;    ///< floor of the band
   bool refine = true;           ///< colour-guided refinement of alpha
@@ -31,8 +32,9 @@ struct OcclusionOptions {
   double guide_sigma_space = 1.5;   ///< in pixels
 };
 
-/// Fills holes (0) of a depth map from the median of valid neighbours; large holes stay 0.
-DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes);
+/// Fills holes (0) of a depth map from the far side of their valid neighbours; connected holes of
+/// more than `max_hole_px` pixels stay 0.
+DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px);
 
 /// Visibility of the virtual surface at each pixel, 0 (hidden by the real scene) .. 1 (in front).
 /// `virtual_depth_m` is the camera-space depth of the virtual surface per pixel (+inf where there
