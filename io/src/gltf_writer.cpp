@@ -1,0 +1,200 @@
+#include "artrace/io/gltf_model.h"
+
+#include <tiny_gltf.h>
+
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace artrace::io {
+namespace {
+
+/// Appends raw bytes to buffer 0 and returns an accessor over them.
+int add_accessor(tinygltf::Model& m, const void* data, size_t bytes, size_t count, int type, int ctype,
+                 std::vector<double> min = {}, std::vector<double> max = {}) {
+  tinygltf::Buffer& b = m.buffers[0];
+  while (b.data.size() % 4) b.data.push_back(0);
+  tinygltf::BufferView v;
+  v.buffer = 0;
+  v.byteOffset = b.data.size();
+  v.byteLength = bytes;
+  b.data.insert(b.data.end(), static_cast<const unsigned char*>(data), static_cast<const unsigned char*>(data) + bytes);
+  m.bufferViews.push_back(v);
+  tinygltf::Accessor a;
+  a.bufferView = static_cast<int>(m.bufferViews.size() - 1);
+  a.count = count;
+  a.type = type;
+  a.componentType = ctype;
+  a.minValues = std::move(min);
+  a.maxValues = std::move(max);
+  m.accessors.push_back(a);
+  return static_cast<int>(m.accessors.size() - 1);
+}
+
+}  // namespace
+
+void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
+  tinygltf::Model m;
+  m.asset.version = "2.0";
+  m.asset.generator = "artrace";
+  m.buffers.emplace_back();
+  for (size_t i = 1; i < model.materials.size(); ++i) {
+    const GltfMaterial& g = model.materials[i];
+    tinygltf::Material mat;
+    mat.name = g.name;
+    mat.pbrMetallicRoughness.baseColorFactor = {g.base_color.r, g.base_color.g, g.base_color.b, 1.0};
+    mat.pbrMetallicRoughness.metallicFactor = g.metallic;
+    mat.pbrMetallicRoughness.roughnessFactor = g.roughness;
+    if (g.transmission > 0.0f) {
+      tinygltf::Value::Object t;
+      t["transmissionFactor"] = tinygltf::Value(static_cast<double>(g.transmission));
+      mat.extensions["KHR_materials_transmission"] = tinygltf::Value(t);
+      tinygltf::Value::Object ior;
+      ior["ior"] = tinygltf::Value(static_cast<double>(g.ior));
+      mat.extensions["KHR_materials_ior"] = tinygltf::Value(ior);
+      m.extensionsUsed = {"KHR_materials_transmission", "KHR_materials_ior"};
+    }
+    m.materials.push_back(mat);
+  }
+  for (const GltfMesh& gm : model.meshes) {
+    tinygltf::Mesh mesh;
+    // one primitive per material, vertices unshared (flat facets)
+    for (size_t mat = 0; mat < model.materials.size(); ++mat) {
+      std::vector<float> pos;
+      glm::vec3 lo(INFINITY), hi(-INFINITY);
+      for (size_t t = 0; t < gm.tris.size(); ++t) {
+        if (gm.material[t] != mat) continue;
+        for (const glm::vec3& v : {gm.tris[t].v0, gm.tris[t].v1, gm.tris[t].v2}) {
+          pos.insert(pos.end(), {v.x, v.y, v.z});
+          lo = glm::min(lo, v);
+          hi = glm::max(hi, v);
+        }
+      }
+      if (pos.empty()) continue;
+      tinygltf::Primitive p;
+      p.mode = TINYGLTF_MODE_TRIANGLES;
+      p.attributes["POSITION"] = add_accessor(m, pos.data(), pos.size() * 4, pos.size() / 3, TINYGLTF_TYPE_VEC3,
+                                              TINYGLTF_COMPONENT_TYPE_FLOAT, {lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z});
+      p.material = mat == 0 ? -1 : static_cast<int>(mat - 1);
+      mesh.primitives.push_back(p);
+    }
+    m.meshes.push_back(mesh);
+  }
+  for (size_t i = 0; i < model.nodes.size(); ++i) {
+    const GltfNode& g = model.nodes[i];
+    tinygltf::Node n;
+    n.name = g.name;
+    n.mesh = g.mesh;
+    n.translation = {g.translation.x, g.translation.y, g.translation.z};
+    n.rotation = {g.rotation.x, g.rotation.y, g.rotation.z, g.rotation.w};
+    n.scale = {g.scale.x, g.scale.y, g.scale.z};
+    m.nodes.push_back(n);
+    if (g.parent >= 0) m.nodes[g.parent].children.push_back(static_cast<int>(i));
+  }
+  tinygltf::Scene scene;
+  for (size_t i = 0; i < model.nodes.size(); ++i) {
+    if (model.nodes[i].parent < 0) scene.nodes.push_back(static_cast<int>(i));
+  }
+  m.scenes.push_back(scene);
+  m.defaultScene = 0;
+  for (const GltfAnimation& ga : model.animations) {
+    tinygltf::Animation a;
+    a.name = ga.name;
+    for (const GltfChannel& c : ga.channels) {
+      tinygltf::AnimationSampler s;
+      s.input = add_accessor(m, c.times.data(), c.times.size() * 4, c.times.size(), TINYGLTF_TYPE_SCALAR,
+                             TINYGLTF_COMPONENT_TYPE_FLOAT, {c.times.front()}, {c.times.back()});
+      const int comps = c.path == GltfChannel::kRotation ? 4 : 3;
+      std::vector<float> v;
+      for (const glm::vec4& x : c.values) for (int k = 0; k < comps; ++k) v.push_back(x[k]);
+      s.output = add_accessor(m, v.data(), v.size() * 4, c.values.size(), comps == 4 ? TINYGLTF_TYPE_VEC4 : TINYGLTF_TYPE_VEC3,
+                              TINYGLTF_COMPONENT_TYPE_FLOAT);
+      s.interpolation = c.interpolation == GltfChannel::kStep ? "STEP" : c.interpolation == GltfChannel::kCubic ? "CUBICSPLINE" : "LINEAR";
+      a.samplers.push_back(s);
+      tinygltf::AnimationChannel ch;
+      ch.sampler = static_cast<int>(a.samplers.size() - 1);
+      ch.target_node = c.node;
+      ch.target_path = c.path == GltfChannel::kTranslation ? "translation" : c.path == GltfChannel::kRotation ? "rotation" : "scale";
+      a.channels.push_back(ch);
+    }
+    m.animations.push_back(a);
+  }
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  const bool binary = path.extension() == ".glb";
+  const std::filesystem::path tmp = path.string() + (binary ? ".partial.glb" : ".partial.gltf");
+  tinygltf::TinyGLTF writer;
+  if (!writer.WriteGltfSceneToFile(&m, tmp.string(), true, true, true, binary)) {
+    std::filesystem::remove(tmp);
+    throw std::runtime_error(path.string() + ": cannot write glTF");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+GltfModel make_spinning_box(float size, const glm::vec3& color) {
+  GltfModel m;
+  m.materials.resize(2);
+  m.materials[1].name = "painted";
+  m.materials[1].base_color = color;
+  m.materials[1].roughness = 0.6f;
+  GltfMesh mesh;
+  const float h = 0.5f * size;
+  const glm::vec3 lo(-h, 0.0f, -h), hi(h, size, h);
+  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
+                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  const int f[12][3] = {{0, 3, 2}, {0, 2, 1}, {4, 5, 6}, {4, 6, 7}, {0, 4, 7}, {0, 7, 3},
+                        {1, 2, 6}, {1, 6, 5}, {3, 7, 6}, {3, 6, 2}, {0, 1, 5}, {0, 5, 4}};
+  for (const auto& k : f) {
+    mesh.tris.push_back({v[k[0]], v[k[1]], v[k[2]]});
+    mesh.material.push_back(1);
+  }
+  m.meshes.push_back(mesh);
+  GltfNode node;
+  node.name = "box";
+  node.mesh = 0;
+  m.nodes.push_back(node);
+  GltfAnimation spin;
+  spin.name = "spin";
+  GltfChannel c;
+  c.node = 0;
+  c.path = GltfChannel::kRotation;
+  for (int k = 0; k <= 4; ++k) {
+    c.times.push_back(static_cast<float>(k));
+    const glm::quat q = glm::angleAxis(glm::radians(90.0f * k), glm::vec3(0, 1, 0));
+    c.values.push_back(glm::vec4(q.x, q.y, q.z, q.w));
+  }
+  spin.channels.push_back(c);
+  spin.duration_s = 4.0f;
+  m.animations.push_back(spin);
+  return m;
+}
+
+GltfModel make_glass_sphere(float radius) {
+  GltfModel m;
+  m.materials.resize(2);
+  m.materials[1].name = "glass";
+  m.materials[1].base_color = glm::vec3(0.95f);
+  m.materials[1].roughness = 0.0f;
+  m.materials[1].transmission = 1.0f;
+  m.materials[1].ior = 1.5f;
+  GltfMesh mesh;
+  constexpr int kRings = 16, kSegments = 32;
+  auto p = [&](int i, int j) {
+    const float th = 3.14159265f * i / kRings, ph = 6.2831853f * j / kSegments;
+    return radius * glm::vec3(std::sin(th) * std::cos(ph), std::cos(th), std::sin(th) * std::sin(ph)) + glm::vec3(0, radius, 0);
+  };
+  for (int i = 0; i < kRings; ++i) {
+    for (int j = 0; j < kSegments; ++j) {
+      if (i > 0) mesh.tris.push_back({p(i, j), p(i, j + 1), p(i + 1, j + 1)});
+      if (i + 1 < kRings) mesh.tris.push_back({p(i, j), p(i + 1, j + 1), p(i + 1, j)});
+    }
+  }
+  mesh.material.assign(mesh.tris.size(), 1);
+  m.meshes.push_back(mesh);
+  GltfNode node;
+  node.name = "sphere";
+  node.mesh = 0;
+  m.nodes.push_back(node);
+  return m;
+}
+
+}  // namespace artrace::io

@@ -1,0 +1,93 @@
+#include "artrace/io/gltf_model.h"
+#include "artrace/io/parse_error.h"
+#include "../test_util.h"
+
+#include <fstream>
+
+namespace artrace::io {
+namespace {
+
+TEST(Gltf, WrittenModelsLoadBackWithAnimation) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf";
+  for (const char* name : {"box.gltf", "box.glb"}) {
+    const auto path = dir / name;
+    const GltfModel box = make_spinning_box(0.5f, {0.8f, 0.2f, 0.1f});
+    write_gltf(box, path);
+    const GltfModel m = load_gltf(path);
+    ASSERT_EQ(m.meshes.size(), 1u);
+    ASSERT_EQ(m.meshes[0].tris.size(), 12u);
+    EXPECT_EQ(m.meshes[0].tris[5].v2, box.meshes[0].tris[5].v2);
+    ASSERT_EQ(m.materials.size(), 2u);
+    EXPECT_FLOAT_EQ(m.materials[m.meshes[0].material[0]].base_color.r, 0.8f);
+    ASSERT_EQ(m.animations.size(), 1u);
+    EXPECT_FLOAT_EQ(m.animations[0].duration_s, 4.0f);
+    // a quarter turn a second about +y: x goes to -z after 1 s, 45 degrees after 0.5 s (slerp)
+    const glm::vec4 x(1, 0, 0, 1);
+    const glm::vec3 at1 = glm::vec3(m.node_transforms(0, 1.0f)[0] * x);
+    EXPECT_NEAR(at1.z, -1.0f, 1e-5f);
+    const glm::vec3 at_half = glm::vec3(m.node_transforms(0, 0.5f)[0] * x);
+    EXPECT_NEAR(at_half.x, std::sqrt(0.5f), 1e-5f);
+    EXPECT_NEAR(at_half.z, -std::sqrt(0.5f), 1e-5f);
+    const glm::vec3 looped = glm::vec3(m.node_transforms(0, 5.0f)[0] * x);  // 5 s = 1 s into the loop
+    EXPECT_NEAR(looped.z, -1.0f, 1e-5f);
+    const glm::vec3 rest = glm::vec3(m.node_transforms(-1, 1.0f)[0] * x);
+    EXPECT_NEAR(rest.x, 1.0f, 1e-6f);
+  }
+  const GltfModel glass = load_gltf((write_gltf(make_glass_sphere(0.1f), dir / "glass.gltf"), dir / "glass.gltf"));
+  EXPECT_FLOAT_EQ(glass.materials[1].transmission, 1.0f);
+  EXPECT_FLOAT_EQ(glass.materials[1].ior, 1.5f);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Gltf, StepAndCubicSplineSamplers) {
+  GltfModel m = make_spinning_box(1.0f, glm::vec3(1.0f));
+  GltfChannel step;
+  step.node = 0;
+  step.path = GltfChannel::kTranslation;
+  step.interpolation = GltfChannel::kStep;
+  step.times = {0.0f, 1.0f, 2.0f};
+  step.values = {glm::vec4(0, 0, 0, 0), glm::vec4(5, 0, 0, 0), glm::vec4(9, 0, 0, 0)};
+  GltfChannel cubic;
+  cubic.node = 0;
+  cubic.path = GltfChannel::kScale;
+  cubic.interpolation = GltfChannel::kCubic;
+  cubic.times = {0.0f, 2.0f};
+  // per key: in-tangent, value, out-tangent; zero tangents give smoothstep between the values
+  cubic.values = {glm::vec4(0), glm::vec4(1, 1, 1, 0), glm::vec4(0), glm::vec4(0), glm::vec4(3, 3, 3, 0), glm::vec4(0)};
+  m.animations[0].channels = {step, cubic};
+  m.animations[0].duration_s = 2.5f;
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf2";
+  write_gltf(m, dir / "samplers.gltf");
+  const GltfModel l = load_gltf(dir / "samplers.gltf");
+  const glm::mat4 a = l.node_transforms(0, 1.5f)[0];
+  EXPECT_FLOAT_EQ(a[3].x, 5.0f) << "STEP holds the value of key 1";
+  // scale at t = 1.5: s = 0.75, smoothstep 3 s^2 - 2 s^3 = 0.84375 -> 1 + 2 * 0.84375
+  EXPECT_NEAR(glm::length(glm::vec3(a[0])), 1.0f + 2.0f * 0.84375f, 1e-5f);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Gltf, BrokenFilesNameTheFile) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf_bad";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "garbage.gltf") << "{ this is not json";
+  std::ofstream(dir / "empty.glb") << "";
+  // a triangle indexing a fourth vertex of three
+  std::ofstream(dir / "bad_index.gltf")
+      << R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":42,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAMA"}],)"
+      << R"("bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],)"
+      << R"("accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},)"
+      << R"({"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],)"
+      << R"("nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}]})";
+  for (const char* name : {"garbage.gltf", "empty.glb", "bad_index.gltf", "missing.gltf"}) {
+    try {
+      load_gltf(dir / name);
+      ADD_FAILURE() << name << " was accepted";
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / name).string()), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace artrace::io
