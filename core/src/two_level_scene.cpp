@@ -293,6 +293,12 @@ Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
   return {glm::vec3(m * glm::vec4(t.v0, 1.0f)), glm::vec3(m * glm::vec4(t.v1, 1.0f)), glm::vec3(m * glm::vec4(t.v2, 1.0f))};
 }
 
+Aabb TwoLevelScene::bounds() const {
+  Aabb b = top_.empty() ? Aabb{} : top_[0].bounds;
+  if (config_ == Config::kKdTreeBvh) b.extend(kd_.bounds());
+  return b;
+}
+
 size_t TwoLevelScene::instance_count() const {
   return static_cast<size_t>(std::count_if(instances_.begin(), instances_.end(), [](const Instance& i) { return i.alive; }));
 }

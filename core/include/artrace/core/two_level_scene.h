@@ -120,6 +120,8 @@ class TwoLevelScene {
   static uint32_t deformable_object_id(DeformableHandle h) { return 0x80000000u | h.index; }
 
   Config config() const { return config_; }
+  /// World bounds of everything committed (empty box for an empty scene).
+  Aabb bounds() const;
   size_t instance_count() const;
   /// Nodes of all object BVHs built so far (lazily) and still waiting.
   BvhStats bvh_stats() const;

@@ -1,0 +1,90 @@
+// AR scene files (JSON): which glTF models to place in a recording's world, how, and the lights.
+//
+//   {
+//     "models": [
+//       { "file": "models/box.gltf", "position": [0, 0.76, 0], "rotation_deg": [0, 30, 0],
+//         "scale": 1.0 | [sx, sy, sz], "animation": { "clip": 0 | "name", "speed": 1.0 },
+//         "material": { "kind": "diffuse" | "mirror" | "glass", "base_color": [r, g, b], "ior": 1.5 } }
+//     ],
+//     "lights": [ { "position": [x, y, z], "color": [r, g, b] } ],
+//     "ambient": 0.3
+//   }
+//
+// Paths are relative to the JSON file. Every key is checked: an unknown key or a wrong type is an
+// error naming the file and the key ("scene.json: models[1].rotation_deg: expected 3 numbers").
+// Without lights, one light is estimated from the frame's brightness (see ar::Compositor).
+#pragma once
+
+#include "artrace/io/gltf_model.h"
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace artrace::io {
+
+enum class SurfaceKind { kDiffuse, kMirror, kGlass };
+
+struct ArModelPlacement {
+  std::filesystem::path file;
+  glm::vec3 position{0.0f};
+  glm::vec3 rotation_deg{0.0f};  ///< applied as Rz · Ry · Rx
+  glm::vec3 scale{1.0f};
+  int clip = -1;      ///< -1: no animation
+  float speed = 1.0f;
+  std::optional<SurfaceKind> kind;
+  std::optional<glm::vec3> base_color;
+  std::optional<float> ior;
+
+  glm::mat4 world_from_model() const;
+};
+
+struct ArLightSpec {
+  glm::vec3 position{0.0f};
+  glm::vec3 color{1.0f};
+};
+
+struct ArSceneFile {
+  std::filesystem::path file;
+  std::vector<ArModelPlacement> models;
+  std::vector<GltfModel> loaded;  ///< one per placement
+  std::vector<ArLightSpec> lights;
+  float ambient = 0.3f;
+};
+
+/// Loads the JSON and every model it names. Throws ParseError.
+ArSceneFile load_ar_scene(const std::filesystem::path& path);
+
+}  // namespace artrace::io
+
+#include "artrace/ar/compositor.h"
+#include "artrace/core/two_level_scene.h"
+
+namespace artrace::io {
+
+/// The virtual objects of an AR scene file in a two-level scene: one rigid-mesh instance per
+/// (placement, glTF node with a mesh); node animations drive the instances' transforms.
+class ArRuntime {
+ public:
+  explicit ArRuntime(const ArSceneFile& scene);
+  /// Moves the animated models to recording time t (seconds) and commits. Returns milliseconds.
+  double update(double time_s);
+  const core::TwoLevelScene& scene() const { return scene_; }
+  ar::VirtualMaterial material(const core::Hit& hit) const;
+  std::vector<ar::VirtualLight> lights() const;
+  float ambient() const { return file_.ambient; }
+
+ private:
+  struct Part {
+    size_t placement;
+    int node;
+    int mesh;
+    core::InstanceHandle instance;
+  };
+  const ArSceneFile& file_;
+  core::TwoLevelScene scene_{core::TwoLevelScene::Config::kBvh};
+  std::vector<Part> parts_;  ///< indexed by instance slot
+};
+
+}  // namespace artrace::io

@@ -1,0 +1,167 @@
+// artrace export: composites an AR scene into a recording and writes a clip (video through
+// OpenCV: H.264 where available, MPEG-4 otherwise; or numbered PNGs). The output appears under its
+// final name only when complete; Ctrl-C stops cleanly and leaves nothing behind.
+#include "bench_util.h"
+#include "commands.h"
+
+#include "artrace/ar/compositor.h"
+#include "artrace/io/ar_scene.h"
+#include "artrace/io/recording.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <memory>
+
+namespace artrace::tools {
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void on_sigint(int) { g_interrupted = true; }
+
+cv::Mat to_bgr(const ar::ColorImage& c) {
+  cv::Mat rgb(c.height, c.width, CV_8UC3, const_cast<uint8_t*>(c.rgb.data()));
+  cv::Mat bgr;
+  cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
+  return bgr;
+}
+
+cv::Mat depth_view(const ar::DepthImage& d, int w, int h) {
+  cv::Mat gray(d.height, d.width, CV_8UC1);
+  for (int y = 0; y < d.height; ++y) {
+    for (int x = 0; x < d.width; ++x) {
+      const float z = d.at(x, y);
+      gray.at<uint8_t>(y, x) = z > 0.0f ? static_cast<uint8_t>(std::clamp(255.0f * (1.0f - z / 8.0f), 1.0f, 255.0f)) : 0;
+    }
+  }
+  cv::Mat colour;
+  cv::applyColorMap(gray, colour, cv::COLORMAP_TURBO);
+  colour.setTo(cv::Scalar(0, 0, 0), gray == 0);
+  if (colour.cols != w || colour.rows != h) cv::resize(colour, colour, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
+  return colour;
+}
+
+struct Options {
+  std::string recording, scene, output;
+  int first = 0, last = -1, threads = 0;
+  bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
+};
+
+void run(const Options& opt) {
+  const io::ArSceneFile scene_file = io::load_ar_scene(opt.scene);
+  io::ArRuntime runtime(scene_file);
+  auto source = io::open_recording(opt.recording);
+  const int64_t count = source->frame_count().value_or(0);
+  const int64_t last = opt.last >= 0 ? std::min<int64_t>(opt.last, count - 1) : count - 1;
+  if (opt.first < 0 || opt.first > last) throw std::invalid_argument("frame range " + std::to_string(opt.first) + ".." + std::to_string(last) + " is empty");
+  source->seek(opt.first);
+
+  const std::filesystem::path out(opt.output);
+  const std::string ext = out.extension().string();
+  const bool video = ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
+  const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + ext)
+                                              : std::filesystem::path(out.string() + ".partial");
+  if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
+  std::filesystem::remove_all(partial);
+  if (!video) std::filesystem::create_directories(partial);
+  cv::VideoWriter writer;
+  auto cleanup = [&] {
+    writer.release();
+    std::error_code ec;
+    std::filesystem::remove_all(partial, ec);
+  };
+
+  ar::CompositeOptions copt;
+  copt.occlusion = !opt.no_occlusion;
+  copt.shadows = !opt.no_shadows;
+  copt.lights = runtime.lights();
+  copt.ambient = runtime.ambient();
+  copt.threads = opt.threads;
+  g_interrupted = false;
+  auto previous = std::signal(SIGINT, on_sigint);
+  const int64_t total = last - opt.first + 1;
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<double> frame_ms;
+  try {
+    ar::SensorFrame f;
+    for (int64_t k = 0; k < total; ++k) {
+      if (g_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
+      if (!source->next(f)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
+      const auto t0 = std::chrono::steady_clock::now();
+      runtime.update(f.color_time_s);
+      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const core::Hit& h) { return runtime.material(h); }, copt);
+      cv::Mat img = to_bgr(c);
+      if (opt.side_by_side) cv::hconcat(std::vector<cv::Mat>{img, to_bgr(f.color), depth_view(f.depth, c.width, c.height)}, img);
+      frame_ms.push_back(ms_since(t0));
+      if (video) {
+        if (!writer.isOpened()) {
+          const double fps = total > 1 ? 30.0 : 30.0;
+          for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
+            if (ext != ".avi" || std::string(cc) == "MJPG") {
+              writer.open(partial.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), fps, img.size());
+              if (writer.isOpened()) break;
+            }
+          }
+          if (!writer.isOpened()) throw std::runtime_error(out.string() + ": OpenCV has no video encoder for " + ext);
+        }
+        writer.write(img);
+      } else {
+        char name[32];
+        std::snprintf(name, sizeof(name), "frame_%06lld.png", static_cast<long long>(opt.first + k));
+        if (!cv::imwrite((partial / name).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
+      }
+      if (!opt.quiet) {
+        const double s = ms_since(start) / 1000.0, fps = (k + 1) / std::max(s, 1e-9);
+        std::fprintf(stderr, "\rframe %lld/%lld  %.1f frames/s  %.0f s left   ", static_cast<long long>(k + 1),
+                     static_cast<long long>(total), fps, (total - k - 1) / fps);
+      }
+    }
+  } catch (...) {
+    std::signal(SIGINT, previous);
+    if (!opt.quiet) std::fprintf(stderr, "\n");
+    cleanup();
+    throw;
+  }
+  std::signal(SIGINT, previous);
+  writer.release();
+  std::filesystem::remove_all(out);
+  std::filesystem::rename(partial, out);
+  const double s = ms_since(start) / 1000.0;
+  if (!opt.quiet) std::fprintf(stderr, "\n");
+  std::printf("%s: %lld frames in %.2f s (%.1f frames/s, %.1f ms median per frame)\n", out.string().c_str(),
+              static_cast<long long>(total), s, total / std::max(s, 1e-9), median(frame_ms));
+}
+
+}  // namespace
+
+void add_export_command(CLI::App& app) {
+  auto opt = std::make_shared<Options>();
+  CLI::App* cmd = app.add_subcommand("export", "Composite an AR scene into a recording and write a clip");
+  cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
+  cmd->add_option("--scene", opt->scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder for numbered PNGs")->required();
+  cmd->add_option("--first", opt->first, "first frame")->capture_default_str();
+  cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str();
+  cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
+  cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
+  cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
+  cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
+  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
+  cmd->callback([opt] { run(*opt); });
+
+  auto dir = std::make_shared<std::string>();
+  CLI::App* models = app.add_subcommand("make-models", "Write the project's own glTF models (a spinning box, a glass sphere)");
+  models->add_option("folder", *dir, "where to write them")->required();
+  models->callback([dir] {
+    io::write_gltf(io::make_spinning_box(0.2f, {0.85f, 0.25f, 0.1f}), std::filesystem::path(*dir) / "spinning_box.gltf");
+    io::write_gltf(io::make_glass_sphere(0.12f), std::filesystem::path(*dir) / "glass_sphere.gltf");
+    std::printf("%s: spinning_box.gltf, glass_sphere.gltf\n", dir->c_str());
+  });
+}
+
+}  // namespace artrace::tools
