@@ -1,6 +1,7 @@
 #include "artrace/ar/compositor.h"
 
 #include "artrace/core/renderer.h"
+#include "artrace/core/srgb.h"
 
 #include <algorithm>
 #include <chrono>
@@ -9,17 +10,6 @@
 
 namespace artrace::ar {
 namespace {
-
-float srgb_to_linear(uint8_t v) {
-  const float c = v / 255.0f;
-  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-}
-
-uint8_t linear_to_srgb(float linear) {
-  const float c = std::fmin(std::fmax(linear, 0.0f), 1.0f);
-  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
-  return static_cast<uint8_t>(std::lround(s * 255.0f));
-}
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -51,7 +41,7 @@ struct Shader {
       const int x = static_cast<int>(cam.fx * c.x / c.z + cam.cx), y = static_cast<int>(cam.fy * c.y / c.z + cam.cy);
       if (x < 0 || y < 0 || x >= frame.color.width || y >= frame.color.height) continue;
       const uint8_t* px = frame.color.at(x, y);
-      return {srgb_to_linear(px[0]), srgb_to_linear(px[1]), srgb_to_linear(px[2])};
+      return {core::srgb8_to_linear(px[0]), core::srgb8_to_linear(px[1]), core::srgb8_to_linear(px[2])};
     }
     return glm::vec3(0.5f);
   }
@@ -100,8 +90,8 @@ struct Shader {
 VirtualLight estimate_light(const SensorFrame& frame) {
   double sum = 0.0;
   for (size_t i = 0; i < frame.color.rgb.size(); i += 3) {
-    sum += 0.2126 * srgb_to_linear(frame.color.rgb[i]) + 0.7152 * srgb_to_linear(frame.color.rgb[i + 1]) +
-           0.0722 * srgb_to_linear(frame.color.rgb[i + 2]);
+    sum += 0.2126 * core::srgb8_to_linear(frame.color.rgb[i]) + 0.7152 * core::srgb8_to_linear(frame.color.rgb[i + 1]) +
+           0.0722 * core::srgb8_to_linear(frame.color.rgb[i + 2]);
   }
   const double mean = frame.color.rgb.empty() ? 0.5 : sum / (frame.color.rgb.size() / 3);
   VirtualLight l;
@@ -199,8 +189,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       const size_t i = static_cast<size_t>(y) * w + x;
       if (alpha[i] <= 0.0f) continue;
       for (int c = 0; c < 3; ++c) {
-        const float real = srgb_to_linear(frame.color.rgb[3 * i + c]);
-        out.rgb[3 * i + c] = linear_to_srgb(alpha[i] * colour[i][c] + (1.0f - alpha[i]) * real);
+        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]);
+        out.rgb[3 * i + c] = core::linear_to_srgb8(alpha[i] * colour[i][c] + (1.0f - alpha[i]) * real);
       }
     }
   }

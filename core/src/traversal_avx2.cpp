@@ -24,33 +24,11 @@ LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask
 
 
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (!mask) return;
-  BestHits<8> best;
-  best.t = load<Vec<8>::F>(rays.tmax);
-  best.u = best.v = splat<Vec<8>::F>(0.0f);
-  best.prim = best.inst = splat<Vec<8>::U>(kInvalidId);
-  best.done = splat<Vec<8>::M>(0);
-  trace_bvh_lanes<8, false>(bvh, rays.org, rays.dir, rays.tmin, mask, best, kInvalidId);
-  for (int i = 0; i < 8; ++i) {
-    if ((mask >> i) & 1u) {
-      hits.t[i] = lane(best.t, i);
-      hits.u[i] = lane(best.u, i);
-      hits.v[i] = lane(best.v, i);
-      hits.prim[i] = lane(best.prim, i);
-      hits.inst[i] = lane(best.inst, i);
-    }
-  }
+  if (mask) trace_bvh_packet<8, false>(bvh, rays, 0, mask, &hits);
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  if (!mask) return 0;
-  BestHits<8> best;
-  best.t = load<Vec<8>::F>(rays.tmax);
-  best.u = best.v = splat<Vec<8>::F>(0.0f);
-  best.prim = best.inst = splat<Vec<8>::U>(kInvalidId);
-  best.done = splat<Vec<8>::M>(0);
-  trace_bvh_lanes<8, true>(bvh, rays.org, rays.dir, rays.tmin, mask, best, kInvalidId);
-  return movemask(best.done) & mask;
+  return mask ? trace_bvh_packet<8, true>(bvh, rays, 0, mask, nullptr) : 0u;
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {

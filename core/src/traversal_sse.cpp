@@ -118,54 +118,14 @@ Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray) { return to_hit(bvh
 bool bvh_occluded_single(const BvhView& bvh, const Ray& ray) { return bvh_single<true>(bvh, ray, fresh_best(ray)).done != 0; }
 
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  for (int half = 0; half < 2; ++half) {
-    const uint32_t m = (mask >> (4 * half)) & 0x0fu;
-    if (!m) continue;
-    float org[3][4], dir[3][4];
-    for (int a = 0; a < 3; ++a) {
-      for (int i = 0; i < 4; ++i) {
-        org[a][i] = rays.org[a][4 * half + i];
-        dir[a][i] = rays.dir[a][4 * half + i];
-      }
-    }
-    BestHits<4> best;
-    best.t = load<Vec<4>::F>(rays.tmax + 4 * half);
-    best.u = best.v = splat<Vec<4>::F>(0.0f);
-    best.prim = best.inst = splat<Vec<4>::U>(kInvalidId);
-    best.done = splat<Vec<4>::M>(0);
-    trace_bvh_lanes<4, false>(bvh, org, dir, rays.tmin + 4 * half, m, best, kInvalidId);
-    for (int i = 0; i < 4; ++i) {
-      if ((m >> i) & 1u) {
-        hits.t[4 * half + i] = lane(best.t, i);
-        hits.u[4 * half + i] = lane(best.u, i);
-        hits.v[4 * half + i] = lane(best.v, i);
-        hits.prim[4 * half + i] = lane(best.prim, i);
-        hits.inst[4 * half + i] = lane(best.inst, i);
-      }
-    }
-  }
+  if (mask & 0x0fu) trace_bvh_packet<4, false>(bvh, rays, 0, mask & 0x0fu, &hits);
+  if (mask & 0xf0u) trace_bvh_packet<4, false>(bvh, rays, 4, (mask >> 4) & 0x0fu, &hits);
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
   LaneMask blocked = 0;
-  for (int half = 0; half < 2; ++half) {
-    const uint32_t m = (mask >> (4 * half)) & 0x0fu;
-    if (!m) continue;
-    float org[3][4], dir[3][4];
-    for (int a = 0; a < 3; ++a) {
-      for (int i = 0; i < 4; ++i) {
-        org[a][i] = rays.org[a][4 * half + i];
-        dir[a][i] = rays.dir[a][4 * half + i];
-      }
-    }
-    BestHits<4> best;
-    best.t = load<Vec<4>::F>(rays.tmax + 4 * half);
-    best.u = best.v = splat<Vec<4>::F>(0.0f);
-    best.prim = best.inst = splat<Vec<4>::U>(kInvalidId);
-    best.done = splat<Vec<4>::M>(0);
-    trace_bvh_lanes<4, true>(bvh, org, dir, rays.tmin + 4 * half, m, best, kInvalidId);
-    blocked |= (movemask(best.done) & m) << (4 * half);
-  }
+  if (mask & 0x0fu) blocked |= trace_bvh_packet<4, true>(bvh, rays, 0, mask & 0x0fu, nullptr);
+  if (mask & 0xf0u) blocked |= trace_bvh_packet<4, true>(bvh, rays, 4, (mask >> 4) & 0x0fu, nullptr) << 4;
   return blocked;
 }
 

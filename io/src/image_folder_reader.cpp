@@ -1,6 +1,7 @@
 #include "artrace/io/image_folder_reader.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/tum_reader.h"
+#include "cv_convert.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -106,21 +107,8 @@ bool ImageFolderReader::next(ar::SensorFrame& f) {
   f = ar::SensorFrame{};
   f.index = cursor_;
   f.color_time_s = f.depth_time_s = static_cast<double>(cursor_) / options_.fps;
-  f.color.width = bgr.cols;
-  f.color.height = bgr.rows;
-  f.color.rgb.resize(static_cast<size_t>(bgr.cols) * bgr.rows * 3);
-  cv::Mat rgb(bgr.rows, bgr.cols, CV_8UC3, f.color.rgb.data());
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  f.depth.width = raw.cols;
-  f.depth.height = raw.rows;
-  f.depth.depth_m.resize(static_cast<size_t>(raw.cols) * raw.rows);
-  const float scale = static_cast<float>(1.0 / options_.depth_per_metre);
-  for (int y = 0; y < raw.rows; ++y) {
-    const uint16_t* row = raw.ptr<uint16_t>(y);
-    for (int x = 0; x < raw.cols; ++x) {
-      f.depth.depth_m[static_cast<size_t>(y) * raw.cols + x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : row[x] * scale;
-    }
-  }
+  f.color = color_from_bgr(bgr);
+  f.depth = depth_from_u16(raw, options_.depth_per_metre);
   ar::PinholeIntrinsics k = intrinsics_.value_or(
       ar::PinholeIntrinsics{bgr.cols, bgr.rows, 525.0 * bgr.cols / 640.0, 525.0 * bgr.cols / 640.0, 0.5 * bgr.cols - 0.5, 0.5 * bgr.rows - 0.5});
   k.width = bgr.cols;

@@ -2,22 +2,13 @@
 #include "artrace/io/bart_animation.h"
 
 #include "artrace/core/renderer.h"
+#include "artrace/core/srgb.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 
 #include <cmath>
 
 namespace artrace::io {
-namespace {
-
-uint8_t srgb8(float linear) {
-  const float c = std::fmin(std::fmax(linear, 0.0f), 1.0f);
-  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
-  return static_cast<uint8_t>(std::lround(s * 255.0f));
-}
-
-}  // namespace
-
 struct Synthesizer::Impl {
   const AffScene& scene;
   SynthOptions opt;
@@ -91,7 +82,7 @@ ar::SensorFrame Synthesizer::render(int k) {
             for (const glm::vec3& lp : lights) light += glm::vec3(0.8f / lights.size()) * std::fmax(0.0f, glm::dot(n, glm::normalize(lp - p)));
             c = m.diffuse * light;
           }
-          for (int ch = 0; ch < 3; ++ch) f.color.rgb[3 * idx + ch] = srgb8(c[ch]);
+          for (int ch = 0; ch < 3; ++ch) f.color.rgb[3 * idx + ch] = core::linear_to_srgb8(c[ch]);
         }
       }
     }

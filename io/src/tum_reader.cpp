@@ -1,5 +1,6 @@
 #include "artrace/io/tum_reader.h"
 #include "artrace/io/parse_error.h"
+#include "cv_convert.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -223,20 +224,8 @@ ar::SensorFrame TumReader::read(int64_t i) const {
     throw ParseError(dp.string(), 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
                                             ", colour " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
   }
-  f.color.width = bgr.cols;
-  f.color.height = bgr.rows;
-  f.color.rgb.resize(static_cast<size_t>(bgr.cols) * bgr.rows * 3);
-  cv::Mat rgb(bgr.rows, bgr.cols, CV_8UC3, f.color.rgb.data());
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  f.depth.width = raw.cols;
-  f.depth.height = raw.rows;
-  f.depth.depth_m.resize(static_cast<size_t>(raw.cols) * raw.rows);
-  const float scale = static_cast<float>(1.0 / options_.depth_scale);
-  for (int y = 0; y < raw.rows; ++y) {
-    const uint16_t* row = raw.ptr<uint16_t>(y);
-    float* out = f.depth.depth_m.data() + static_cast<size_t>(y) * raw.cols;
-    for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : row[x] * scale;
-  }
+  f.color = color_from_bgr(bgr);
+  f.depth = depth_from_u16(raw, options_.depth_scale);
   f.color_intrinsics = intrinsics_;
   f.color_intrinsics.width = bgr.cols;
   f.color_intrinsics.height = bgr.rows;
