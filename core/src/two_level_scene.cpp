@@ -320,4 +320,20 @@ BvhStats TwoLevelScene::bvh_stats() const {
   return total;
 }
 
+BvhStats TwoLevelScene::bvh_stats_full() const {
+  BvhStats total;
+  auto add = [&](const Bvh& b) {
+    const BvhStats s = Bvh(b.triangles(), /*eager=*/true).stats();
+    total.nodes_built += s.nodes_built;
+    total.leaves += s.leaves;
+    total.max_depth = std::max(total.max_depth, s.max_depth);
+  };
+  if (static_bvh_) add(*static_bvh_);
+  for (const RigidMesh& m : meshes_) add(*m.bvh);
+  for (const Deformable& d : deformables_) {
+    if (d.mesh) add(d.mesh->bvh());
+  }
+  return total;
+}
+
 }  // namespace artrace::core

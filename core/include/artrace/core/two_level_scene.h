@@ -125,6 +125,8 @@ class TwoLevelScene {
   size_t instance_count() const;
   /// Nodes of all object BVHs built so far (lazily) and still waiting.
   BvhStats bvh_stats() const;
+  /// The same BVHs built in full (copies are built; for reports): what lazy building saves.
+  BvhStats bvh_stats_full() const;
   const KdTree* static_kd_tree() const { return config_ == Config::kKdTreeBvh ? &kd_ : nullptr; }
 
  private:
