@@ -49,6 +49,7 @@ cv::Mat depth_view(const ar::DepthImage& d, int w, int h) {
 struct Options {
   std::string recording, scene, output;
   int first = 0, last = -1, threads = 0;
+  double fps = 30.0;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
 };
 
@@ -100,10 +101,9 @@ void run(const Options& opt) {
       frame_ms.push_back(ms_since(t0));
       if (video) {
         if (!writer.isOpened()) {
-          const double fps = total > 1 ? 30.0 : 30.0;
           for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
             if (ext != ".avi" || std::string(cc) == "MJPG") {
-              writer.open(partial.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), fps, img.size());
+              writer.open(partial.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), opt.fps, img.size());
               if (writer.isOpened()) break;
             }
           }
@@ -148,6 +148,7 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("--first", opt->first, "first frame")->capture_default_str();
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str();
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
+  cmd->add_option("--fps", opt->fps, "frame rate of a video clip")->capture_default_str()->check(CLI::Range(1.0, 1000.0));
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
