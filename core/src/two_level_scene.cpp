@@ -303,36 +303,35 @@ size_t TwoLevelScene::instance_count() const {
   return static_cast<size_t>(std::count_if(instances_.begin(), instances_.end(), [](const Instance& i) { return i.alive; }));
 }
 
+template <class Fn>
+void TwoLevelScene::for_each_bvh(const Fn& fn) const {
+  if (static_bvh_) fn(*static_bvh_);
+  for (const RigidMesh& m : meshes_) fn(*m.bvh);
+  for (const Deformable& d : deformables_) {
+    if (d.mesh) fn(d.mesh->bvh());
+  }
+}
+
+namespace {
+
+void accumulate(BvhStats& total, const BvhStats& s) {
+  total.nodes_built += s.nodes_built;
+  total.nodes_unbuilt += s.nodes_unbuilt;
+  total.leaves += s.leaves;
+  total.max_depth = std::max(total.max_depth, s.max_depth);
+}
+
+}  // namespace
+
 BvhStats TwoLevelScene::bvh_stats() const {
   BvhStats total;
-  auto add = [&](const Bvh& b) {
-    const BvhStats s = b.stats();
-    total.nodes_built += s.nodes_built;
-    total.nodes_unbuilt += s.nodes_unbuilt;
-    total.leaves += s.leaves;
-    total.max_depth = std::max(total.max_depth, s.max_depth);
-  };
-  if (static_bvh_) add(*static_bvh_);
-  for (const RigidMesh& m : meshes_) add(*m.bvh);
-  for (const Deformable& d : deformables_) {
-    if (d.mesh) add(d.mesh->bvh());
-  }
+  for_each_bvh([&](const Bvh& b) { accumulate(total, b.stats()); });
   return total;
 }
 
 BvhStats TwoLevelScene::bvh_stats_full() const {
   BvhStats total;
-  auto add = [&](const Bvh& b) {
-    const BvhStats s = Bvh(b.triangles(), /*eager=*/true).stats();
-    total.nodes_built += s.nodes_built;
-    total.leaves += s.leaves;
-    total.max_depth = std::max(total.max_depth, s.max_depth);
-  };
-  if (static_bvh_) add(*static_bvh_);
-  for (const RigidMesh& m : meshes_) add(*m.bvh);
-  for (const Deformable& d : deformables_) {
-    if (d.mesh) add(d.mesh->bvh());
-  }
+  for_each_bvh([&](const Bvh& b) { accumulate(total, Bvh(b.triangles(), /*eager=*/true).stats()); });
   return total;
 }
 

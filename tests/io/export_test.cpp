@@ -24,6 +24,18 @@ int run(const std::string& cmd) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
+/// A synthetic recording of the demo room.
+void synth_room(const std::filesystem::path& out, int frames, int width, int height) {
+  const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
+  SynthOptions o;
+  o.frames = frames;
+  o.width = width;
+  o.height = height;
+  Synthesizer synth(room, o);
+  auto w = make_recording_writer(out);
+  synth.write(*w);
+}
+
 /// An AR scene with one diffuse box right in front of the camera's first view.
 std::filesystem::path box_scene(const std::filesystem::path& dir) {
   std::filesystem::create_directories(dir);
@@ -70,16 +82,7 @@ TEST(Export, StoppedExportLeavesNoFile) {
   const auto scene = box_scene(dir);
   // a recording whose 6th colour image is damaged: the export fails there
   const auto rec = dir / "rec";
-  {
-    const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
-    SynthOptions o;
-    o.frames = 10;
-    o.width = 64;
-    o.height = 48;
-    Synthesizer synth(room, o);
-    auto w = make_recording_writer(rec);
-    synth.write(*w);
-  }
+  synth_room(rec, 10, 64, 48);
   std::vector<std::filesystem::path> colour;
   for (const auto& e : std::filesystem::directory_iterator(rec / "rgb")) colour.push_back(e.path());
   std::sort(colour.begin(), colour.end());
@@ -94,18 +97,9 @@ TEST(Export, StoppedExportLeavesNoFile) {
       EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << e.path();
     }
   }
-  // Ctrl-C: a long export (the recording looped by frame range is not possible, so a big one)
+  // Ctrl-C during a long export
   const auto big = dir / "big";
-  {
-    const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
-    SynthOptions o;
-    o.frames = 120;
-    o.width = 320;
-    o.height = 240;
-    Synthesizer synth(room, o);
-    auto w = make_recording_writer(big);
-    synth.write(*w);
-  }
+  synth_room(big, 120, 320, 240);
   const auto clip = dir / "interrupted.avi";
   const int status = run("timeout -s INT 0.4 " + std::string(ARTRACE_BINARY) + " export " + big.string() + " --scene " +
                          scene.string() + " -o " + clip.string() + " --side-by-side --threads 1 -q > /dev/null 2>&1");

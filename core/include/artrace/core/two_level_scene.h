@@ -146,6 +146,8 @@ class TwoLevelScene {
   };
 
   Instance& checked(InstanceHandle h);
+  template <class Fn>
+  void for_each_bvh(const Fn& fn) const;
   void build_top(uint32_t node, uint32_t begin, uint32_t end, int depth);
 
   Config config_;
