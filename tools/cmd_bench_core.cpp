@@ -1,6 +1,7 @@
 // artrace bench-core: kd-tree build and ray throughput on one frame of a scene, verified first
 // (kd-tree against brute force, packets against single rays), then timed as the median of N runs
 // after a warm-up; optionally the same rays through Embree in the same run.
+#include "bench_util.h"
 #include "commands.h"
 #include "embree_reference.h"
 
@@ -83,10 +84,9 @@ double median_ms(int runs, const Fn& fn) {
   for (int r = 0; r < runs; ++r) {
     const auto t0 = Clock::now();
     fn();
-    ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    ms.push_back(ms_since(t0));
   }
-  std::sort(ms.begin(), ms.end());
-  return ms[ms.size() / 2];
+  return median(ms);
 }
 
 /// Secondary workloads built from the primary hits: shadow packets towards each light (the lanes
@@ -309,13 +309,7 @@ void run(const Options& opt) {
     std::printf("\n");
   }
   if (out.contains("embree")) std::printf("  embree build %.1f ms\n", out["embree"]["build_ms"].get<double>());
-  if (!opt.json.empty()) {
-    const std::filesystem::path path(opt.json);
-    if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-    std::ofstream f(opt.json);
-    f << out.dump(2) << "\n";
-    if (!f) throw std::runtime_error(opt.json + ": cannot write");
-  }
+  write_json(opt.json, out);
 }
 
 }  // namespace
