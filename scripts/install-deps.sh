@@ -9,6 +9,7 @@ packages=(
   libeigen3-dev libopencv-dev libopencv-contrib-dev libopenni2-dev libtinygltf-dev
   libgtest-dev libgmock-dev
   libembree-dev
+  xvfb  # the replay viewer's test runs under a virtual display
 )
 missing=()
 for p in "${packages[@]}"; do

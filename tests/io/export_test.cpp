@@ -1,51 +1,13 @@
 // The export command as a user runs it: the clip read back with OpenCV, and no file left behind
 // when an export stops early.
-#include "artrace/io/recording_writer.h"
-#include "artrace/io/synth.h"
-#include "../test_util.h"
+#include "../cli_util.h"
 
 #include <opencv2/videoio.hpp>
 
-#include <cstdlib>
 #include <fstream>
 
 namespace artrace::io {
 namespace {
-
-const std::filesystem::path kRoot = ARTRACE_SOURCE_DIR;
-
-#define ARTRACE_REQUIRE_BINARY()                                                             \
-  if (!std::filesystem::exists(ARTRACE_BINARY)) {                                          \
-    GTEST_SKIP() << "the artrace program is not built in this configuration (tools off)";  \
-  }
-
-int run(const std::string& cmd) {
-  const int status = std::system(cmd.c_str());
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-/// A synthetic recording of the demo room.
-void synth_room(const std::filesystem::path& out, int frames, int width, int height) {
-  const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
-  SynthOptions o;
-  o.frames = frames;
-  o.width = width;
-  o.height = height;
-  Synthesizer synth(room, o);
-  auto w = make_recording_writer(out);
-  synth.write(*w);
-}
-
-/// An AR scene with one diffuse box right in front of the camera's first view.
-std::filesystem::path box_scene(const std::filesystem::path& dir) {
-  std::filesystem::create_directories(dir);
-  const auto scene = dir / "scene.json";
-  std::ofstream(scene) << R"({ "models": [ { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string()
-                       << R"(", "position": [0.7, 0.45, 1.0], "scale": 2.5,
-                            "material": { "kind": "diffuse", "base_color": [0.0, 1.0, 0.0] } } ],
-                          "lights": [ { "position": [2.6, 1.6, 3.4], "color": [1, 1, 1] } ], "ambient": 1.0 })";
-  return scene;
-}
 
 TEST(Export, ClipReadsBackWithTheOverlayWhereTheObjectIs) {
   ARTRACE_REQUIRE_BINARY();
