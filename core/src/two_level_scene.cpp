@@ -293,6 +293,11 @@ Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
   return {glm::vec3(m * glm::vec4(t.v0, 1.0f)), glm::vec3(m * glm::vec4(t.v1, 1.0f)), glm::vec3(m * glm::vec4(t.v2, 1.0f))};
 }
 
+glm::mat4 TwoLevelScene::world_from_object(const Hit& hit) const {
+  if (hit.inst == kStaticObject || (hit.inst & 0x80000000u)) return glm::mat4(1.0f);
+  return instances_.at(hit.inst).world_from_object;
+}
+
 Aabb TwoLevelScene::bounds() const {
   Aabb b = top_.empty() ? Aabb{} : top_[0].bounds;
   if (config_ == Config::kKdTreeBvh) b.extend(kd_.bounds());

@@ -117,6 +117,9 @@ class TwoLevelScene {
 
   /// The triangle a hit names, in world space.
   Triangle world_triangle(const Hit& hit) const;
+  /// The transform of the object a hit names (identity for static and deformable geometry); its
+  /// inverse transpose takes object-space normals to world space.
+  glm::mat4 world_from_object(const Hit& hit) const;
   static uint32_t deformable_object_id(DeformableHandle h) { return 0x80000000u | h.index; }
 
   Config config() const { return config_; }

@@ -1,0 +1,364 @@
+#include "artrace/core/whitted.h"
+
+#include <tbb/enumerable_thread_specific.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace artrace::core {
+
+glm::vec3 Texture::bilinear(glm::vec2 uv) const {
+  if (width <= 0 || height <= 0) return glm::vec3(1.0f);
+  // texel centres at (i + 0.5) / width; v = 0 is the bottom row
+  const float x = uv.x * static_cast<float>(width) - 0.5f;
+  const float y = (1.0f - uv.y) * static_cast<float>(height) - 0.5f;
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float ax = x - fx, ay = y - fy;
+  auto wrap = [](long i, int n) { return static_cast<int>(((i % n) + n) % n); };
+  const long ix = static_cast<long>(fx), iy = static_cast<long>(fy);
+  const int x0 = wrap(ix, width), x1 = wrap(ix + 1, width);
+  const int y0 = wrap(iy, height), y1 = wrap(iy + 1, height);
+  auto at = [&](int xx, int yy) { return texels[static_cast<size_t>(yy) * width + xx]; };
+  return (at(x0, y0) * (1.0f - ax) + at(x1, y0) * ax) * (1.0f - ay) + (at(x0, y1) * (1.0f - ax) + at(x1, y1) * ax) * ay;
+}
+
+ShadingMode parse_shading_mode(const std::string& name) {
+  if (name == "diffuse") return ShadingMode::kDiffuse;
+  if (name == "shadows") return ShadingMode::kShadows;
+  if (name == "reflect") return ShadingMode::kReflect;
+  if (name == "all") return ShadingMode::kAll;
+  throw std::invalid_argument("unknown shading mode \"" + name + "\" (diffuse, shadows, reflect or all)");
+}
+
+const char* to_string(ShadingMode m) {
+  switch (m) {
+    case ShadingMode::kDiffuse: return "diffuse";
+    case ShadingMode::kShadows: return "shadows";
+    case ShadingMode::kReflect: return "reflect";
+    case ShadingMode::kAll: return "all";
+  }
+  return "?";
+}
+
+void SurfaceAttributes::shading(const Hit&, const Triangle& world_tri, glm::vec3& normal, glm::vec2& uv) const {
+  normal = world_tri.geometric_normal();
+  uv = glm::vec2(0.0f);
+}
+
+glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, float magnitude) {
+  // Wächter & Binder 2019 move each coordinate by a fixed number of ulps of itself. The error of
+  // a hit point, though, follows the size of the coordinates that went into it (a floor at z = 0
+  // far from the origin has error in z of the order of ulp(x)), so the step is taken relative to
+  // the largest coordinate of the point and of its triangle: 2^-18 of it, about 64 ulps.
+  const float m = std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z), magnitude});
+  const float d = std::max(m * 0x1p-18f, 0x1p-100f);
+  return p + d * n;
+}
+
+float fresnel_dielectric(float cos_i, float eta) {
+  cos_i = std::clamp(cos_i, 0.0f, 1.0f);
+  const float sin2_t = eta * eta * (1.0f - cos_i * cos_i);
+  if (sin2_t >= 1.0f) return 1.0f;
+  const float cos_t = std::sqrt(1.0f - sin2_t);
+  const float rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+  const float rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+  return 0.5f * (rs * rs + rp * rp);
+}
+
+bool refract_direction(const glm::vec3& d, const glm::vec3& n, float eta, glm::vec3& out) {
+  const float cos_i = -glm::dot(d, n);
+  const float sin2_t = eta * eta * (1.0f - cos_i * cos_i);
+  if (sin2_t >= 1.0f) return false;
+  out = glm::normalize(eta * d + (eta * cos_i - std::sqrt(1.0f - sin2_t)) * n);
+  return true;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+inline double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+
+struct Counters {
+  uint64_t primary = 0, shadow = 0, secondary = 0, transmission = 0;
+  double primary_ms = 0, shadow_ms = 0, secondary_ms = 0, total_ms = 0;
+};
+
+/// A ray waiting to be traced: which pixel of the packet it adds to, with what weight.
+struct Pending {
+  Ray ray;
+  glm::vec3 weight;
+  uint8_t lane;
+  uint8_t depth;
+};
+
+/// A shaded hit of the current wave.
+struct Point {
+  glm::vec3 p, ng, ns, view;
+  glm::vec3 diffuse, specular;
+  float magnitude = 0.0f;  ///< largest coordinate of the hit triangle
+  const Material* m = nullptr;
+  bool inside = false;
+};
+
+inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}); }
+
+inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
+
+class WaveTracer {
+ public:
+  WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c) : s_(s), o_(o), c_(c) {
+    for (const Material& m : s.materials) transmissive_ |= m.transmittance > 0.0f;
+  }
+
+  /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
+  void run(std::vector<Pending>& gen, std::vector<Pending>& next, glm::vec3* color) {
+    while (!gen.empty()) {
+      next.clear();
+      for (size_t first = 0; first < gen.size(); first += kPacketSize) {
+        const int n = static_cast<int>(std::min<size_t>(kPacketSize, gen.size() - first));
+        wave(&gen[first], n, color, next);
+      }
+      gen.swap(next);
+    }
+  }
+
+ private:
+  const Material& material(const Hit& h) const {
+    const uint32_t id = s_.surfaces->material(h);
+    if (id >= s_.materials.size()) throw std::out_of_range("material index out of range");
+    return s_.materials[id];
+  }
+
+  void wave(const Pending* rays, int n, glm::vec3* color, std::vector<Pending>& next) {
+    RayPacket rp;
+    HitPacket hp;
+    const LaneMask mask = n == kPacketSize ? kAllLanes : (1u << n) - 1u;
+    for (int i = 0; i < n; ++i) rp.set(i, rays[i].ray);
+    const bool primary = rays[0].depth == 0;
+    const auto t0 = Clock::now();
+    if (primary || o_.secondary_packets) {
+      s_.geometry->intersect(rp, mask, hp);
+    } else {
+      for (int i = 0; i < n; ++i) {
+        const Hit h = s_.geometry->intersect(rays[i].ray);
+        hp.t[i] = h.t, hp.u[i] = h.u, hp.v[i] = h.v, hp.prim[i] = h.prim, hp.inst[i] = h.inst;
+      }
+    }
+    const auto t1 = Clock::now();
+    (primary ? c_.primary_ms : c_.secondary_ms) += ms(t0, t1);
+    (primary ? c_.primary : c_.secondary) += static_cast<uint64_t>(n);
+
+    Point pt[kPacketSize];
+    LaneMask hit_mask = 0;
+    for (int i = 0; i < n; ++i) {
+      const Pending& r = rays[i];
+      if (hp.prim[i] == kInvalidId) {
+        color[r.lane] += r.weight * s_.background;
+        continue;
+      }
+      hit_mask |= 1u << i;
+      const Hit h = hp.get(i);
+      const Triangle tri = s_.geometry->world_triangle(h);
+      Point& q = pt[i];
+      q.p = tri.v0 * (1.0f - h.u - h.v) + tri.v1 * h.u + tri.v2 * h.v;
+      q.ng = glm::normalize(tri.geometric_normal());
+      q.magnitude = std::max({max_abs(tri.v0), max_abs(tri.v1), max_abs(tri.v2)});
+      glm::vec2 uv;
+      s_.surfaces->shading(h, tri, q.ns, uv);
+      q.ns = glm::dot(q.ns, q.ns) > 0.0f ? glm::normalize(q.ns) : q.ng;
+      q.view = -r.ray.dir;
+      if (glm::dot(q.ng, q.view) < 0.0f) {  // the back side: the ray leaves a solid
+        q.ng = -q.ng;
+        q.ns = -q.ns;
+        q.inside = true;
+      }
+      if (glm::dot(q.ns, q.view) <= 0.0f) q.ns = q.ng;  // an interpolated normal facing away
+      q.m = &material(h);
+      const glm::vec3 tex = q.m->texture >= 0 && q.m->texture < static_cast<int32_t>(s_.textures.size())
+                                ? s_.textures[q.m->texture].bilinear(uv)
+                                : glm::vec3(1.0f);
+      q.diffuse = q.m->diffuse * tex;
+      q.specular = q.m->specular;
+      color[r.lane] += r.weight * s_.ambient * q.m->ambient * tex;
+    }
+    if (hit_mask == 0) return;
+
+    // direct light, with shadow packets per light
+    for (const PointLight& light : s_.lights) {
+      glm::vec3 contrib[kPacketSize];
+      LaneMask lit = 0;
+      RayPacket shadow;
+      for (int i = 0; i < n; ++i) {
+        if (!((hit_mask >> i) & 1u)) continue;
+        const Point& q = pt[i];
+        const glm::vec3 to_light = light.position - q.p;
+        const float dist = glm::length(to_light);
+        if (!(dist > 0.0f)) continue;
+        const glm::vec3 l = to_light / dist;
+        const float ndl = glm::dot(q.ns, l);
+        if (ndl <= 0.0f || glm::dot(q.ng, l) <= 0.0f) continue;
+        glm::vec3 c = q.diffuse * ndl;
+        if (q.m->shine > 0.0f && max3(q.specular) > 0.0f) {
+          const glm::vec3 refl = 2.0f * ndl * q.ns - l;
+          const float rv = glm::dot(refl, q.view);
+          if (rv > 0.0f) c += q.specular * std::pow(rv, q.m->shine);
+        }
+        contrib[i] = c * light.color;
+        lit |= 1u << i;
+        if (has_shadows(o_.mode)) {
+          Ray sr;
+          sr.org = offset_ray_origin(q.p, q.ng, q.magnitude);
+          sr.dir = l;
+          sr.tmin = 0.0f;
+          sr.tmax = glm::length(light.position - sr.org);
+          shadow.set(i, sr);
+        }
+      }
+      if (lit == 0) continue;
+      float trans[kPacketSize];
+      for (float& t : trans) t = 1.0f;
+      if (has_shadows(o_.mode)) {
+        const auto s0 = Clock::now();
+        const LaneMask blocked = s_.geometry->occluded(shadow, lit);
+        c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
+        for (int i = 0; i < n; ++i) {
+          if (!((blocked >> i) & 1u)) continue;
+          trans[i] = transmissive_ ? transmission(shadow.get(i)) : 0.0f;
+        }
+        c_.shadow_ms += ms(s0, Clock::now());
+      }
+      for (int i = 0; i < n; ++i) {
+        if ((lit >> i) & 1u) color[rays[i].lane] += rays[i].weight * contrib[i] * trans[i];
+      }
+    }
+
+    // reflection and refraction rays for the next wave
+    if (!has_secondary(o_.mode)) return;
+    for (int i = 0; i < n; ++i) {
+      if (!((hit_mask >> i) & 1u) || rays[i].depth >= o_.max_depth) continue;
+      const Point& q = pt[i];
+      const Pending& r = rays[i];
+      glm::vec3 kr = q.specular;
+      const float kt = q.m->transmittance;
+      if (kt > 0.0f) {
+        const float eta = q.inside ? q.m->ior : 1.0f / q.m->ior;
+        const float f = fresnel_dielectric(glm::dot(q.view, q.ns), eta);
+        kr += glm::vec3(kt * f);
+        glm::vec3 dir;
+        const glm::vec3 wt = r.weight * (kt * (1.0f - f));
+        if (f < 1.0f && max3(wt) > 0.0f && max3(wt) >= o_.min_weight && refract_direction(r.ray.dir, q.ns, eta, dir)) {
+          push(next, q, -q.ng, dir, wt, r);
+        }
+      }
+      const glm::vec3 wr = r.weight * kr;
+      if (max3(wr) > 0.0f && max3(wr) >= o_.min_weight) {
+        glm::vec3 dir = glm::reflect(r.ray.dir, q.ns);
+        if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(r.ray.dir, q.ng);
+        push(next, q, q.ng, dir, wr, r);
+      }
+    }
+  }
+
+  static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
+                   const glm::vec3& weight, const Pending& from) {
+    Pending s;
+    s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
+    s.ray.dir = dir;
+    s.ray.tmin = 0.0f;
+    s.ray.tmax = kInfinity;
+    s.weight = weight;
+    s.lane = from.lane;
+    s.depth = static_cast<uint8_t>(from.depth + 1);
+    next.push_back(s);
+  }
+
+  /// Fraction of light passing along a shadow ray that the any-hit test found blocked: walks the
+  /// surfaces on it; opaque ones stop the light, transmissive ones attenuate it.
+  float transmission(Ray r) {
+    float t = 1.0f;
+    for (int step = 0; step < 16; ++step) {
+      const Hit h = s_.geometry->intersect(r);
+      ++c_.transmission;
+      if (!h.valid()) return t;
+      const float kt = material(h).transmittance;
+      if (kt <= 0.0f) return 0.0f;
+      t *= kt;
+      r.tmin = h.t;
+    }
+    return 0.0f;
+  }
+
+  const ShadingScene& s_;
+  const WhittedOptions& o_;
+  Counters& c_;
+  bool transmissive_ = false;
+};
+
+void check(const ShadingScene& scene) {
+  if (!scene.geometry || !scene.surfaces) throw std::invalid_argument("ShadingScene needs geometry and surfaces");
+}
+
+}  // namespace
+
+Image render_whitted(const ShadingScene& scene, const Camera& cam, const WhittedOptions& opt, WhittedStats* stats) {
+  check(scene);
+  const auto start = Clock::now();
+  Image img(cam.width, cam.height);
+  tbb::enumerable_thread_specific<Counters> counters;
+  for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
+    const auto t0 = Clock::now();
+    Counters& c = counters.local();
+    WaveTracer tracer(scene, opt, c);
+    std::vector<Pending> gen, next;
+    gen.reserve(4 * kPacketSize);
+    next.reserve(4 * kPacketSize);
+    RayPacket rays;
+    for (int y = t.y0; y < t.y1; y += 2) {
+      for (int x = t.x0; x < t.x1; x += 4) {
+        const LaneMask mask = primary_packet(cam, x, y, rays);
+        gen.clear();
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((mask >> i) & 1u) gen.push_back(Pending{rays.get(i), glm::vec3(1.0f), static_cast<uint8_t>(i), 0});
+        }
+        glm::vec3 color[kPacketSize] = {};
+        tracer.run(gen, next, color);
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((mask >> i) & 1u) img.at(x + i % 4, y + i / 4) = color[i];
+        }
+      }
+    }
+    c.total_ms += ms(t0, Clock::now());
+  });
+  if (stats) {
+    WhittedStats s;
+    for (const Counters& c : counters) {
+      s.primary_rays += c.primary;
+      s.shadow_rays += c.shadow;
+      s.secondary_rays += c.secondary;
+      s.transmission_rays += c.transmission;
+      s.primary_ms += c.primary_ms;
+      s.shadow_ms += c.shadow_ms;
+      s.secondary_ms += c.secondary_ms;
+      s.shade_ms += c.total_ms - c.primary_ms - c.shadow_ms - c.secondary_ms;
+    }
+    s.wall_ms = ms(start, Clock::now());
+    *stats = s;
+  }
+  return img;
+}
+
+glm::vec3 trace_whitted(const ShadingScene& scene, const Ray& ray, const WhittedOptions& opt) {
+  check(scene);
+  Counters c;
+  WaveTracer tracer(scene, opt, c);
+  std::vector<Pending> gen{Pending{ray, glm::vec3(1.0f), 0, 0}}, next;
+  glm::vec3 color[kPacketSize] = {};
+  tracer.run(gen, next, color);
+  return color[0];
+}
+
+}  // namespace artrace::core

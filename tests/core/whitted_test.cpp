@@ -1,0 +1,349 @@
+// Whitted shading against answers worked out by hand: Lambert's law on a lit plane, a shadowed
+// point, a mirror, Snell's law through a glass slab, total internal reflection, what each of the
+// four modes adds, and secondary-ray offsets that hold from 1e-3 to 1e4.
+#include "artrace/core/whitted.h"
+
+#include "../test_util.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace artrace::core {
+namespace {
+
+/// A static scene with one material per triangle.
+struct TestScene : SurfaceAttributes {
+  std::vector<Triangle> tris;
+  std::vector<uint32_t> mat;
+  TwoLevelScene geometry{TwoLevelScene::Config::kKdTreeBvh};
+  ShadingScene shading;
+
+  uint32_t material(const Hit& h) const override { return mat.at(h.prim); }
+
+  uint32_t add_material(const Material& m) {
+    shading.materials.push_back(m);
+    return static_cast<uint32_t>(shading.materials.size() - 1);
+  }
+  /// Quad a b c d (counter-clockwise seen from the side its normal points to).
+  void quad(glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d, uint32_t m) {
+    tris.push_back({a, b, c});
+    tris.push_back({a, c, d});
+    mat.insert(mat.end(), {m, m});
+  }
+  /// Square of half size h in the plane z = z0, normal +z (or -z).
+  void square_z(float cx, float cy, float z0, float h, uint32_t m, bool up = true) {
+    const glm::vec3 a{cx - h, cy - h, z0}, b{cx + h, cy - h, z0}, c{cx + h, cy + h, z0}, d{cx - h, cy + h, z0};
+    if (up) {
+      quad(a, b, c, d, m);
+    } else {
+      quad(a, d, c, b, m);
+    }
+  }
+  void commit() {
+    geometry.set_static(tris);
+    geometry.commit();
+    shading.geometry = &geometry;
+    shading.surfaces = this;
+  }
+  glm::vec3 trace(const glm::vec3& org, const glm::vec3& dir, ShadingMode mode, int max_depth = 2) const {
+    Ray r;
+    r.org = org;
+    r.dir = glm::normalize(dir);
+    WhittedOptions o;
+    o.mode = mode;
+    o.max_depth = max_depth;
+    return trace_whitted(shading, r, o);
+  }
+};
+
+Material diffuse(glm::vec3 c, glm::vec3 ambient = glm::vec3(0.0f)) {
+  Material m;
+  m.diffuse = c;
+  m.ambient = ambient;
+  return m;
+}
+
+Material emitter(glm::vec3 c) {  // shows its colour through the ambient term alone
+  Material m;
+  m.diffuse = glm::vec3(0.0f);
+  m.ambient = c;
+  return m;
+}
+
+Material glass(float ior) {
+  Material m;
+  m.diffuse = glm::vec3(0.0f);
+  m.transmittance = 1.0f;
+  m.ior = ior;
+  return m;
+}
+
+void expect_near(const glm::vec3& a, const glm::vec3& b, float rel, const char* what) {
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(a[k], b[k], rel * std::max(1.0f, std::fabs(b[k]))) << what << " channel " << k;
+}
+
+/// Fresnel equations written out independently of the renderer.
+double fresnel_reference(double theta_i, double n1, double n2) {
+  const double s = n1 / n2 * std::sin(theta_i);
+  if (s >= 1.0) return 1.0;
+  const double theta_t = std::asin(s), ci = std::cos(theta_i), ct = std::cos(theta_t);
+  const double rs = (n1 * ci - n2 * ct) / (n1 * ci + n2 * ct), rp = (n2 * ci - n1 * ct) / (n2 * ci + n1 * ct);
+  return 0.5 * (rs * rs + rp * rp);
+}
+
+TEST(Whitted, LitDiffusePlaneFollowsLambert) {
+  TestScene s;
+  s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.5f, 0.4f, 0.3f}, {0.2f, 0.2f, 0.2f})));
+  s.shading.ambient = glm::vec3(0.5f);
+  const PointLight light{{1.0f, 2.0f, 3.0f}, {0.8f, 0.9f, 1.0f}};
+  s.shading.lights = {light};
+  s.commit();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> d(-3.0f, 3.0f);
+  for (int i = 0; i < 200; ++i) {
+    const glm::vec3 p{d(rng), d(rng), 0.0f};
+    const float cos_theta = glm::normalize(light.position - p).z;
+    const glm::vec3 expected = 0.5f * glm::vec3(0.2f) + glm::vec3(0.5f, 0.4f, 0.3f) * light.color * cos_theta;
+    for (ShadingMode m : {ShadingMode::kDiffuse, ShadingMode::kShadows, ShadingMode::kReflect, ShadingMode::kAll}) {
+      expect_near(s.trace(p + glm::vec3(0.3f, -0.2f, 4.0f), glm::vec3(-0.3f, 0.2f, -4.0f), m), expected, 1e-5f, to_string(m));
+    }
+  }
+}
+
+TEST(Whitted, ShadowedPointGetsOnlyAmbient) {
+  TestScene s;
+  s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.6f, 0.6f, 0.6f}, {0.1f, 0.1f, 0.1f})));
+  s.square_z(0, 0, 1, 0.5f, s.add_material(diffuse({0.6f, 0.6f, 0.6f})), false);  // occluder facing the floor
+  s.shading.ambient = glm::vec3(1.0f);
+  s.shading.lights = {{{0.0f, 0.0f, 3.0f}, {1.0f, 1.0f, 1.0f}}};
+  s.commit();
+  // seen from the side, under the occluder: lit without shadows, ambient only with them
+  const glm::vec3 under = s.trace({5.0f, 0.0f, 1.0f}, {-5.0f, 0.0f, -1.0f}, ShadingMode::kShadows);
+  expect_near(under, glm::vec3(0.1f), 1e-6f, "shadowed");
+  expect_near(s.trace({5.0f, 0.0f, 1.0f}, {-5.0f, 0.0f, -1.0f}, ShadingMode::kDiffuse), glm::vec3(0.1f + 0.6f), 1e-5f,
+              "no shadow rays");
+  // (2, 0, 0): the ray to the light passes beside the occluder
+  const float c = glm::normalize(glm::vec3(-2.0f, 0.0f, 3.0f)).z;
+  expect_near(s.trace({7.0f, 0.0f, 1.0f}, {-5.0f, 0.0f, -1.0f}, ShadingMode::kShadows), glm::vec3(0.1f + 0.6f * c), 1e-5f,
+              "lit");
+}
+
+TEST(Whitted, TransmissiveSurfacesAttenuateShadowsInsteadOfBlockingThem) {
+  TestScene s;
+  s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.5f, 0.5f, 0.5f})));
+  Material veil = diffuse({0.1f, 0.1f, 0.1f});
+  veil.transmittance = 0.6f;
+  veil.ior = 1.0f;
+  s.square_z(0, 0, 2, 10, s.add_material(veil), false);  // a semi-transparent sky under the light
+  s.square_z(0, 0, 2.5f, 10, s.add_material(veil), false);
+  s.shading.lights = {{{0.0f, 0.0f, 5.0f}, {1.0f, 1.0f, 1.0f}}};
+  s.commit();
+  // seen from below the veils: two layers pass 0.6 * 0.6 of the light
+  const glm::vec3 seen = s.trace({1.0f, 0.0f, 1.0f}, {-1.0f, 0.0f, -1.0f}, ShadingMode::kShadows);
+  expect_near(seen, glm::vec3(0.5f * 0.36f), 1e-5f, "attenuated");
+}
+
+TEST(Whitted, MirrorReflectsAKnownColour) {
+  TestScene s;
+  Material mirror;
+  mirror.diffuse = glm::vec3(0.0f);
+  mirror.specular = glm::vec3(1.0f);
+  s.square_z(0, 0, 0, 2, s.add_material(mirror));
+  const glm::vec3 wall{0.2f, 0.6f, 0.3f};
+  const uint32_t w = s.add_material(emitter(wall));
+  s.quad({-3, -5, -5}, {-3, 5, -5}, {-3, 5, 5}, {-3, -5, 5}, w);  // wall x = -3 facing +x
+  s.shading.ambient = glm::vec3(1.0f);
+  s.commit();
+  expect_near(s.trace({2, 0, 2}, {-1, 0, -1}, ShadingMode::kReflect), wall, 1e-6f, "mirror");
+  expect_near(s.trace({2, 0, 2}, {-1, 0, -1}, ShadingMode::kAll), wall, 1e-6f, "mirror, all");
+  expect_near(s.trace({2, 0, 2}, {-1, 0, -1}, ShadingMode::kDiffuse), glm::vec3(0.0f), 1e-6f, "no reflection rays");
+  expect_near(s.trace({2, 0, 2}, {-1, 0, -1}, ShadingMode::kShadows), glm::vec3(0.0f), 1e-6f, "no reflection rays");
+}
+
+TEST(Whitted, GlassSlabRefractsBySnellsLaw) {
+  const float ior = 1.5f;
+  const double theta = 40.0 * M_PI / 180.0, theta_t = std::asin(std::sin(theta) / ior);
+  // slab between z = -1 and z = 0; the ray enters at the origin, leaves at z = -1 displaced by
+  // tan(theta_t), and meets the plane z = -2 at x = tan(theta_t) + tan(theta)
+  const float x_refracted = static_cast<float>(std::tan(theta_t) + std::tan(theta));
+  const float x_straight = static_cast<float>(2.0 * std::tan(theta));
+  TestScene s;
+  const uint32_t g = s.add_material(glass(ior));
+  s.square_z(0, 0, 0, 20, g, true);
+  s.square_z(0, 0, -1, 20, g, false);
+  const glm::vec3 colour{0.9f, 0.5f, 0.2f}, other{0.1f, 0.2f, 0.9f};
+  s.square_z(x_refracted, 0, -2, 0.02f, s.add_material(emitter(colour)));
+  s.square_z(x_straight, 0, -2, 0.02f, s.add_material(emitter(other)));
+  s.shading.ambient = glm::vec3(1.0f);
+  s.commit();
+  const glm::vec3 dir{static_cast<float>(std::sin(theta)), 0.0f, static_cast<float>(-std::cos(theta))};
+  const glm::vec3 org = -dir * 2.0f;
+  const double f = fresnel_reference(theta, 1.0, ior);  // the same at both faces of a parallel slab
+  EXPECT_NEAR(fresnel_reference(theta_t, ior, 1.0), f, 1e-9);
+  expect_near(s.trace(org, dir, ShadingMode::kReflect), colour * static_cast<float>((1.0 - f) * (1.0 - f)), 1e-5f,
+              "through the slab");
+  expect_near(s.trace(org, dir, ShadingMode::kDiffuse), glm::vec3(0.0f), 1e-6f, "no refraction rays");
+}
+
+TEST(Whitted, TotalInternalReflection) {
+  const float ior = 1.5f;
+  TestScene s;
+  const uint32_t g = s.add_material(glass(ior));
+  s.square_z(0, 0, 0, 20, g, true);    // top face of a slab, seen from inside
+  s.square_z(0, 0, -1, 20, g, false);  // bottom face
+  const glm::vec3 colour{0.3f, 0.8f, 0.4f};
+  s.shading.ambient = glm::vec3(1.0f);
+  // from (0, 0, -0.5) up to the top face at angle theta, back down to a target at z = -0.75
+  for (double deg : {60.0, 45.0, 20.0}) {
+    const double theta = deg * M_PI / 180.0;
+    TestScene t = {};
+    t.tris = s.tris;
+    t.mat = s.mat;
+    t.shading.materials = s.shading.materials;
+    t.shading.ambient = s.shading.ambient;
+    const float x = static_cast<float>(1.25 * std::tan(theta));  // 0.5 up, 0.75 down
+    t.square_z(x, 0, -0.75f, 0.01f, t.add_material(emitter(colour)));
+    t.commit();
+    const glm::vec3 dir{static_cast<float>(std::sin(theta)), 0.0f, static_cast<float>(std::cos(theta))};
+    const double f = fresnel_reference(theta, ior, 1.0);  // 1 past the critical angle (41.8 degrees)
+    if (deg > 41.9) EXPECT_EQ(f, 1.0);
+    expect_near(t.trace({0, 0, -0.5f}, dir, ShadingMode::kReflect), colour * static_cast<float>(f), 1e-5f,
+                deg > 41.9 ? "total internal reflection" : "partial reflection");
+  }
+  EXPECT_EQ(fresnel_dielectric(std::cos(60.0f * static_cast<float>(M_PI) / 180.0f), ior), 1.0f);
+  glm::vec3 out;
+  EXPECT_FALSE(refract_direction(glm::normalize(glm::vec3(0.866f, 0, 0.5f)), {0, 0, -1}, ior, out));
+}
+
+/// A small room: floor, a mirror, a glass block, an occluder, two lights; rendered in the four modes.
+TestScene room() {
+  TestScene s;
+  const uint32_t floor = s.add_material(diffuse({0.6f, 0.5f, 0.4f}, {0.1f, 0.1f, 0.1f}));
+  Material mirror = diffuse({0.1f, 0.1f, 0.1f});
+  mirror.specular = glm::vec3(0.8f);
+  const uint32_t m = s.add_material(mirror);
+  Material g = glass(1.5f);
+  g.specular = glm::vec3(0.05f);
+  const uint32_t gl = s.add_material(g);
+  const uint32_t box = s.add_material(diffuse({0.2f, 0.7f, 0.3f}));
+  s.square_z(0, 0, 0, 4, floor);
+  s.quad({-2, 2, 0}, {2, 2, 0}, {2, 2, 2}, {-2, 2, 2}, m);  // mirror at y = 2, facing -y... and +y
+  s.square_z(1.2f, 0, 0.6f, 0.4f, gl);                      // a glass sheet
+  s.square_z(1.2f, 0, 0.4f, 0.4f, gl, false);
+  s.square_z(-1, -0.5f, 0.8f, 0.3f, box);  // a floating tile that casts a shadow
+  s.square_z(-1, -0.5f, 0.8f, 0.3f, box, false);
+  s.shading.ambient = glm::vec3(0.5f);
+  s.shading.lights = {{{-1.2f, -0.6f, 3.0f}, {0.7f, 0.7f, 0.7f}}, {{2.0f, -2.0f, 2.5f}, {0.4f, 0.4f, 0.5f}}};
+  s.commit();
+  return s;
+}
+
+TEST(Whitted, TheFourModesDifferExactlyInTheEffectsTheyInclude) {
+  const TestScene s = room();
+  const Camera cam = Camera::look_at({0.0f, -4.0f, 3.0f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 50.0f, 64, 48);
+  Image img[4];
+  for (int k = 0; k < 4; ++k) {
+    WhittedOptions o;
+    o.mode = static_cast<ShadingMode>(k);
+    o.threads = 2;
+    img[k] = render_whitted(s.shading, cam, o);
+  }
+  const Image &diffuse_only = img[0], &shadows = img[1], &reflect = img[2], &all = img[3];
+  int shadowed = 0, reflecting = 0;
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const Hit h = s.geometry.intersect(cam.ray(x + 0.5f, y + 0.5f));
+      const bool plain = h.valid() && s.shading.materials[s.mat[h.prim]].transmittance == 0.0f &&
+                         s.shading.materials[s.mat[h.prim]].specular == glm::vec3(0.0f);
+      if (!h.valid() || plain) {
+        // a plain diffuse surface spawns no secondary rays: reflection modes change nothing there
+        EXPECT_EQ(reflect.at(x, y), diffuse_only.at(x, y)) << x << "," << y;
+        EXPECT_EQ(all.at(x, y), shadows.at(x, y)) << x << "," << y;
+      } else {
+        reflecting += reflect.at(x, y) != diffuse_only.at(x, y);
+      }
+      // shadows only take light away
+      for (int c = 0; c < 3; ++c) EXPECT_LE(shadows.at(x, y)[c], diffuse_only.at(x, y)[c] + 1e-6f);
+      shadowed += plain && shadows.at(x, y) != diffuse_only.at(x, y);
+    }
+  }
+  EXPECT_GT(shadowed, 20) << "the floating tile's shadow";
+  EXPECT_GT(reflecting, 100) << "the mirror and the glass";
+}
+
+TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
+  const TestScene s = room();
+  const Camera cam = Camera::look_at({0.5f, -4.0f, 2.5f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 60.0f, 80, 56);
+  WhittedOptions o;
+  o.mode = ShadingMode::kAll;
+  o.threads = 1;
+  const Image a = render_whitted(s.shading, cam, o);
+  o.threads = 2;
+  const Image b = render_whitted(s.shading, cam, o);
+  o.secondary_packets = false;
+  const Image c = render_whitted(s.shading, cam, o);
+  EXPECT_EQ(a.pixels, b.pixels);
+  EXPECT_EQ(a.pixels, c.pixels);
+}
+
+/// Floor z = 0 split by a wall x = 0 (both at scale s, moved by `shift`), a light on the +x side
+/// and a grazing one: floor points on the far side are in shadow up to the wall's foot (no light
+/// leaks under it), points on the near side get Lambert's value from each light (no acne).
+void check_offsets(float scale, glm::vec3 shift) {
+  TestScene s;
+  const uint32_t floor = s.add_material(diffuse({0.5f, 0.5f, 0.5f}));
+  const uint32_t wall = s.add_material(diffuse({0.5f, 0.5f, 0.5f}));
+  auto P = [&](float x, float y, float z) { return shift + scale * glm::vec3(x, y, z); };
+  s.quad(P(-1, -1, 0), P(1, -1, 0), P(1, 1, 0), P(-1, 1, 0), floor);
+  s.quad(P(0, -1, 0), P(0, 1, 0), P(0, 1, 1), P(0, -1, 1), wall);
+  s.commit();
+  // Points closer to the wall than a few units in the last place of the coordinates cannot be
+  // told apart from points on it: the probes keep 8 ulps of the largest coordinate away.
+  const float big = std::max({std::fabs(shift.x), std::fabs(shift.y), std::fabs(shift.z)}) + scale;
+  const float min_gap = 8.0f * (std::nextafter(big, 2.0f * big) - big);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-0.9f, 0.9f), tiny(-6.0f, -1.0f);
+  int leaks = 0, acne = 0, probes = 0;
+  for (const PointLight light : {PointLight{P(0.5f, 0.0f, 0.5f), glm::vec3(1.0f)}, PointLight{P(3.0f, 0.2f, 0.02f), glm::vec3(1.0f)}}) {
+    s.shading.lights = {light};
+    for (int i = 0; i < 300; ++i) {
+      // half of the probes hug the wall: 10^-6 .. 10^-1 of the scale from it
+      float x = scale * u(rng);
+      if (i % 2) x = std::copysign(std::max(scale * std::pow(10.0f, tiny(rng)), min_gap), x);
+      const glm::vec3 p = shift + glm::vec3(x, scale * u(rng), 0.0f);
+      ++probes;
+      const glm::vec3 seen = s.trace(p + glm::vec3(0, 0, 2.0f * scale), {0, 0, -1}, ShadingMode::kShadows);
+      if (p.x < shift.x) {
+        leaks += seen != glm::vec3(0.0f);
+      } else {
+        const float expected = 0.5f * glm::normalize(light.position - p).z;
+        acne += std::fabs(seen.x - expected) > 0.02f * expected;
+      }
+    }
+  }
+  EXPECT_EQ(leaks, 0) << "scale " << scale << ": light leaking under the wall";
+  EXPECT_EQ(acne, 0) << "scale " << scale << ": shadow acne";
+  EXPECT_EQ(probes, 600);
+}
+
+TEST(Whitted, SecondaryRayOffsetsHoldFromTinyToHugeCoordinates) {
+  for (float scale : {1e-3f, 1.0f, 1e2f, 1e4f}) check_offsets(scale, glm::vec3(0.0f));
+  check_offsets(1.0f, glm::vec3(1e4f, -1e4f, 1e3f));   // small scene far from the origin
+  check_offsets(1e-3f, glm::vec3(10.0f, 5.0f, -3.0f));
+}
+
+TEST(Whitted, TexturesAreFilteredBilinearly) {
+  Texture t;
+  t.width = 2;
+  t.height = 1;
+  t.texels = {glm::vec3(0.0f), glm::vec3(1.0f)};
+  expect_near(t.bilinear({0.25f, 0.5f}), glm::vec3(0.0f), 1e-6f, "texel centre");
+  expect_near(t.bilinear({0.5f, 0.5f}), glm::vec3(0.5f), 1e-6f, "half way");
+  expect_near(t.bilinear({0.0f, 0.5f}), glm::vec3(0.5f), 1e-6f, "wraps around");
+  expect_near(t.bilinear({1.25f, 0.5f}), glm::vec3(0.0f), 1e-6f, "repeats");
+}
+
+}  // namespace
+}  // namespace artrace::core
