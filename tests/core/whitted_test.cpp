@@ -298,10 +298,14 @@ void check_offsets(float scale, glm::vec3 shift) {
   auto P = [&](float x, float y, float z) { return shift + scale * glm::vec3(x, y, z); };
   s.quad(P(-1, -1, 0), P(1, -1, 0), P(1, 1, 0), P(-1, 1, 0), floor);
   s.quad(P(0, -1, 0), P(0, 1, 0), P(0, 1, 1), P(0, -1, 1), wall);
+  // and a low ceiling over x > 0, y > 0.5: a thousandth of the scale above the floor, or 1e-5 of
+  // the largest coordinate where that is more (closer surfaces are at the limit of float)
+  const float big = std::max({std::fabs(shift.x), std::fabs(shift.y), std::fabs(shift.z)}) + scale;
+  const float gap = std::max(1e-3f, 1e-5f * big / scale);
+  s.quad(P(0, 0.5f, gap), P(0, 1, gap), P(1, 1, gap), P(1, 0.5f, gap), wall);
   s.commit();
   // Points closer to the wall than a few units in the last place of the coordinates cannot be
   // told apart from points on it: the probes keep 8 ulps of the largest coordinate away.
-  const float big = std::max({std::fabs(shift.x), std::fabs(shift.y), std::fabs(shift.z)}) + scale;
   const float min_gap = 8.0f * (std::nextafter(big, 2.0f * big) - big);
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-0.9f, 0.9f), tiny(-6.0f, -1.0f);
@@ -312,7 +316,9 @@ void check_offsets(float scale, glm::vec3 shift) {
       // half of the probes hug the wall: 10^-6 .. 10^-1 of the scale from it
       float x = scale * u(rng);
       if (i % 2) x = std::copysign(std::max(scale * std::pow(10.0f, tiny(rng)), min_gap), x);
-      const glm::vec3 p = shift + glm::vec3(x, scale * u(rng), 0.0f);
+      float y = scale * u(rng);
+      if (y > 0.45f * scale) y = -y;  // probes under the ceiling come below
+      const glm::vec3 p = shift + glm::vec3(x, y, 0.0f);
       ++probes;
       const glm::vec3 seen = s.trace(p + glm::vec3(0, 0, 2.0f * scale), {0, 0, -1}, ShadingMode::kShadows);
       if (p.x < shift.x) {
@@ -323,9 +329,18 @@ void check_offsets(float scale, glm::vec3 shift) {
       }
     }
   }
-  EXPECT_EQ(leaks, 0) << "scale " << scale << ": light leaking under the wall";
+  // under the ceiling, seen from the open side: no light from above gets in
+  s.shading.lights = {PointLight{P(0.5f, 0.75f, 0.5f), glm::vec3(1.0f)}};  // right above the ceiling
+  for (int i = 0; i < 100; ++i) {
+    const glm::vec3 p = P(0.1f + 0.8f * (u(rng) + 0.9f) / 1.8f, 0.6f + 0.3f * (u(rng) + 0.9f) / 1.8f, 0.0f);
+    // a ray from the side below the ceiling (x < 0 is walled off, so come in from y = 0.4)
+    const glm::vec3 from = glm::vec3(p.x, shift.y + 0.4f * scale, shift.z + 0.5f * gap * scale);
+    leaks += s.trace(from, p - from, ShadingMode::kShadows) != glm::vec3(0.0f);
+    ++probes;
+  }
+  EXPECT_EQ(leaks, 0) << "scale " << scale << ": light leaking under the wall or the ceiling";
   EXPECT_EQ(acne, 0) << "scale " << scale << ": shadow acne";
-  EXPECT_EQ(probes, 600);
+  EXPECT_EQ(probes, 700);
 }
 
 TEST(Whitted, SecondaryRayOffsetsHoldFromTinyToHugeCoordinates) {
