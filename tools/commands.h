@@ -17,6 +17,7 @@ void add_recording_commands(CLI::App& app);
 void add_bench_occlusion_command(CLI::App& app);
 void add_export_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
+void add_bench_bart_command(CLI::App& app);
 
 /// Writes an image as 8-bit PNG (sRGB-encoded) via a temporary file renamed into place, so an
 /// interrupted run never leaves a half-written file under the final name. Throws on failure.

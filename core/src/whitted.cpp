@@ -43,10 +43,7 @@ const char* to_string(ShadingMode m) {
   return "?";
 }
 
-void SurfaceAttributes::shading(const Hit&, const Triangle& world_tri, glm::vec3& normal, glm::vec2& uv) const {
-  normal = world_tri.geometric_normal();
-  uv = glm::vec2(0.0f);
-}
+void SurfaceAttributes::shading(const Hit&, const Triangle&, SurfaceInfo&) const {}
 
 glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, float magnitude) {
   // Wächter & Binder 2019 move each coordinate by a fixed number of ulps of itself. The error of
@@ -110,7 +107,8 @@ inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z))
 
 class WaveTracer {
  public:
-  WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c) : s_(s), o_(o), c_(c) {
+  WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const std::vector<Aabb>* boxes)
+      : s_(s), o_(o), c_(c), boxes_(boxes) {
     for (const Material& m : s.materials) transmissive_ |= m.transmittance > 0.0f;
   }
 
@@ -167,9 +165,9 @@ class WaveTracer {
       q.p = tri.v0 * (1.0f - h.u - h.v) + tri.v1 * h.u + tri.v2 * h.v;
       q.ng = glm::normalize(tri.geometric_normal());
       q.magnitude = std::max({max_abs(tri.v0), max_abs(tri.v1), max_abs(tri.v2)});
-      glm::vec2 uv;
-      s_.surfaces->shading(h, tri, q.ns, uv);
-      q.ns = glm::dot(q.ns, q.ns) > 0.0f ? glm::normalize(q.ns) : q.ng;
+      SurfaceInfo info;
+      s_.surfaces->shading(h, tri, info);
+      q.ns = glm::dot(info.normal, info.normal) > 0.0f ? glm::normalize(info.normal) : q.ng;
       q.view = -r.ray.dir;
       if (glm::dot(q.ng, q.view) < 0.0f) {  // the back side: the ray leaves a solid
         q.ng = -q.ng;
@@ -178,8 +176,9 @@ class WaveTracer {
       }
       if (glm::dot(q.ns, q.view) <= 0.0f) q.ns = q.ng;  // an interpolated normal facing away
       q.m = &material(h);
-      const glm::vec3 tex = q.m->texture >= 0 && q.m->texture < static_cast<int32_t>(s_.textures.size())
-                                ? s_.textures[q.m->texture].bilinear(uv)
+      const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
+      const glm::vec3 tex = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size())
+                                ? s_.textures[texture].bilinear(info.uv)
                                 : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
@@ -225,10 +224,13 @@ class WaveTracer {
         const auto s0 = Clock::now();
         const LaneMask blocked = s_.geometry->occluded(shadow, lit);
         c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
+        LaneMask walk = 0;
         for (int i = 0; i < n; ++i) {
           if (!((blocked >> i) & 1u)) continue;
-          trans[i] = transmissive_ ? transmission(shadow.get(i)) : 0.0f;
+          trans[i] = 0.0f;
+          if (transmissive_ && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
         }
+        if (walk) transmission(shadow, walk, trans);
         c_.shadow_ms += ms(s0, Clock::now());
       }
       for (int i = 0; i < n; ++i) {
@@ -276,25 +278,57 @@ class WaveTracer {
     next.push_back(s);
   }
 
-  /// Fraction of light passing along a shadow ray that the any-hit test found blocked: walks the
-  /// surfaces on it; opaque ones stop the light, transmissive ones attenuate it.
-  float transmission(Ray r) {
-    float t = 1.0f;
-    for (int step = 0; step < 16; ++step) {
-      const Hit h = s_.geometry->intersect(r);
-      ++c_.transmission;
-      if (!h.valid()) return t;
-      const float kt = material(h).transmittance;
-      if (kt <= 0.0f) return 0.0f;
-      t *= kt;
-      r.tmin = h.t;
+  /// Whether a shadow ray's segment meets a box holding transmissive triangles.
+  bool may_cross_transmissive(const Ray& r) const {
+    if (!boxes_) return true;
+    for (const Aabb& b : *boxes_) {
+      float t0 = r.tmin, t1 = r.tmax;
+      bool hit = true;
+      for (int a = 0; a < 3 && hit; ++a) {
+        const float inv = 1.0f / r.dir[a];
+        float n = (b.lo[a] - r.org[a]) * inv, f = (b.hi[a] - r.org[a]) * inv;
+        if (n > f) std::swap(n, f);
+        t0 = std::max(t0, n);
+        t1 = std::min(t1, f);
+        hit = t0 <= t1;
+      }
+      if (hit) return true;
     }
-    return 0.0f;
+    return false;
+  }
+
+  /// For the lanes in `walk`, blocked by the any-hit test but possibly only by transmissive
+  /// surfaces: walks the surfaces on each ray (closest hits, traced as a packet); opaque ones stop
+  /// the light, transmissive ones attenuate it. Writes the fraction that passes to trans[lane].
+  void transmission(RayPacket rays, LaneMask walk, float* trans) {
+    float t[kPacketSize];
+    for (int i = 0; i < kPacketSize; ++i) t[i] = 1.0f;
+    HitPacket hp;
+    for (int step = 0; step < 16 && walk; ++step) {
+      s_.geometry->intersect(rays, walk, hp);
+      c_.transmission += static_cast<uint64_t>(__builtin_popcount(walk));
+      for (int i = 0; i < kPacketSize; ++i) {
+        if (!((walk >> i) & 1u)) continue;
+        if (hp.prim[i] == kInvalidId) {  // reached the light
+          trans[i] = t[i];
+          walk &= ~(1u << i);
+          continue;
+        }
+        const float kt = material(hp.get(i)).transmittance;
+        if (kt <= 0.0f) {
+          walk &= ~(1u << i);  // trans[i] stays 0
+          continue;
+        }
+        t[i] *= kt;
+        rays.tmin[i] = hp.t[i];  // on past this surface
+      }
+    }
   }
 
   const ShadingScene& s_;
   const WhittedOptions& o_;
   Counters& c_;
+  const std::vector<Aabb>* boxes_;
   bool transmissive_ = false;
 };
 
@@ -308,11 +342,13 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
   check(scene);
   const auto start = Clock::now();
   Image img(cam.width, cam.height);
+  std::vector<Aabb> boxes;
+  const bool have_boxes = scene.surfaces->transmissive_bounds(boxes);
   tbb::enumerable_thread_specific<Counters> counters;
   for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
     const auto t0 = Clock::now();
     Counters& c = counters.local();
-    WaveTracer tracer(scene, opt, c);
+    WaveTracer tracer(scene, opt, c, have_boxes ? &boxes : nullptr);
     std::vector<Pending> gen, next;
     gen.reserve(4 * kPacketSize);
     next.reserve(4 * kPacketSize);
@@ -354,7 +390,9 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
 glm::vec3 trace_whitted(const ShadingScene& scene, const Ray& ray, const WhittedOptions& opt) {
   check(scene);
   Counters c;
-  WaveTracer tracer(scene, opt, c);
+  std::vector<Aabb> boxes;
+  const bool have_boxes = scene.surfaces->transmissive_bounds(boxes);
+  WaveTracer tracer(scene, opt, c, have_boxes ? &boxes : nullptr);
   std::vector<Pending> gen{Pending{ray, glm::vec3(1.0f), 0, 0}}, next;
   glm::vec3 color[kPacketSize] = {};
   tracer.run(gen, next, color);

@@ -64,4 +64,10 @@ uint32_t BartAnimation::material(const core::Hit& hit) const {
   return aff_.nodes[instance_node_.at(hit.inst)].geometry.material.at(hit.prim);
 }
 
+const TriangleBatch* BartAnimation::batch(const core::Hit& hit) const {
+  if (!hit.valid() || (hit.inst != core::kStaticObject && (hit.inst & 0x80000000u))) return nullptr;
+  if (hit.inst == core::kStaticObject) return &aff_.nodes[0].geometry;
+  return &aff_.nodes[instance_node_.at(hit.inst)].geometry;
+}
+
 }  // namespace artrace::io

@@ -53,14 +53,28 @@ const char* to_string(ShadingMode m);
 inline bool has_shadows(ShadingMode m) { return m == ShadingMode::kShadows || m == ShadingMode::kAll; }
 inline bool has_secondary(ShadingMode m) { return m == ShadingMode::kReflect || m == ShadingMode::kAll; }
 
+/// Shading attributes at a hit point.
+struct SurfaceInfo {
+  glm::vec3 normal{0.0f};  ///< world space, any length; zero: the geometric normal
+  glm::vec2 uv{0.0f};
+  int32_t texture = -1;    ///< overrides the material's texture when >= 0
+};
+
 /// What the renderer asks of the application about a hit: its material and, at the hit's
-/// barycentric coordinates, the shading normal (world space, any length) and texture coordinates.
+/// barycentric coordinates, the shading normal, texture coordinates and texture.
 class SurfaceAttributes {
  public:
   virtual ~SurfaceAttributes() = default;
   virtual uint32_t material(const Hit& hit) const = 0;
-  /// Default: the geometric normal and uv = (0, 0).
-  virtual void shading(const Hit& hit, const Triangle& world_tri, glm::vec3& normal, glm::vec2& uv) const;
+  /// Default: leaves `info` as it is (geometric normal, no texture coordinates).
+  virtual void shading(const Hit& hit, const Triangle& world_tri, SurfaceInfo& info) const;
+  /// World boxes holding every transmissive triangle (for the current frame). A shadow ray found
+  /// blocked whose segment meets none of them is blocked by an opaque surface and needs no walk.
+  /// Return false when unknown (every blocked shadow ray is then walked).
+  virtual bool transmissive_bounds(std::vector<Aabb>& boxes) const {
+    (void)boxes;
+    return false;
+  }
 };
 
 struct ShadingScene {

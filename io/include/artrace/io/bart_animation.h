@@ -23,6 +23,11 @@ class BartAnimation {
   const AffScene& aff() const { return aff_; }
   /// Material of the triangle a hit names (index into aff().materials).
   uint32_t material(const core::Hit& hit) const;
+  /// The triangles (with normals, texture coordinates) of the object a hit names; hit.prim indexes
+  /// them. Null for animated (`tpa`) triangles.
+  const TriangleBatch* batch(const core::Hit& hit) const;
+  /// AFF node of every instance (indexed by instance slot).
+  const std::vector<uint32_t>& instance_nodes() const { return instance_node_; }
 
  private:
   const AffScene& aff_;

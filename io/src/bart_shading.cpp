@@ -1,0 +1,185 @@
+#include "artrace/io/bart_shading.h"
+
+#include "artrace/core/srgb.h"
+#include "artrace/io/parse_error.h"
+
+#include <fstream>
+#include <cctype>
+#include <cmath>
+
+namespace artrace::io {
+namespace {
+
+/// Next header token of a PPM: skips white space and # comments.
+std::string ppm_token(std::istream& in, const std::string& file, const char* what) {
+  std::string tok;
+  int c;
+  while ((c = in.get()) != EOF) {
+    if (c == '#') {
+      while ((c = in.get()) != EOF && c != '\n') {
+      }
+      continue;
+    }
+    if (std::isspace(c)) {
+      if (!tok.empty()) return tok;
+      continue;
+    }
+    tok.push_back(static_cast<char>(c));
+  }
+  if (tok.empty()) throw ParseError(file, 0, 0, std::string("truncated header: expected ") + what);
+  return tok;
+}
+
+int ppm_int(std::istream& in, const std::string& file, const char* what, int lo, int hi) {
+  const std::string tok = ppm_token(in, file, what);
+  size_t used = 0;
+  long v = -1;
+  try {
+    v = std::stol(tok, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != tok.size() || v < lo || v > hi) {
+    throw ParseError(file, 0, 0, std::string("expected ") + what + " (" + std::to_string(lo) + ".." + std::to_string(hi) + "), got \"" + tok + "\"");
+  }
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
+core::Texture load_ppm(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ParseError(file, 0, 0, "cannot open the texture");
+  if (ppm_token(in, file, "the magic number P6") != "P6") throw ParseError(file, 0, 0, "not a binary PPM (P6) image");
+  core::Texture t;
+  t.width = ppm_int(in, file, "the width", 1, 1 << 15);
+  t.height = ppm_int(in, file, "the height", 1, 1 << 15);
+  const int maxval = ppm_int(in, file, "the maximum value", 1, 65535);
+  // the header ends with exactly one white-space character, already read by ppm_token
+  const size_t bytes_per = maxval < 256 ? 1 : 2;
+  const size_t n = static_cast<size_t>(t.width) * t.height * 3;
+  std::vector<uint8_t> data(n * bytes_per);
+  in.read(reinterpret_cast<char*>(data.data()), static_cast<std::streamsize>(data.size()));
+  if (static_cast<size_t>(in.gcount()) != data.size()) {
+    throw ParseError(file, 0, 0, "truncated pixel data: " + std::to_string(in.gcount()) + " of " + std::to_string(data.size()) + " bytes");
+  }
+  t.texels.resize(n / 3);
+  for (size_t i = 0; i < n; ++i) {
+    float v;
+    if (bytes_per == 1) {
+      v = maxval == 255 ? core::srgb8_to_linear(data[i]) : core::srgb8_to_linear(static_cast<uint8_t>(data[i] * 255 / maxval));
+    } else {
+      const int raw = (data[2 * i] << 8) | data[2 * i + 1];
+      const float c = std::min(1.0f, static_cast<float>(raw) / static_cast<float>(maxval));
+      v = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+    }
+    t.texels[i / 3][static_cast<int>(i % 3)] = v;
+  }
+  return t;
+}
+
+namespace {
+
+/// Boxes around runs of consecutive transmissive triangles, merged pairwise down to `cap` boxes.
+std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const std::vector<AffMaterial>& materials, size_t cap) {
+  std::vector<core::Aabb> boxes;
+  bool open = false;
+  for (size_t i = 0; i < b.size(); ++i) {
+    const uint32_t m = b.material[i];
+    const bool t = m < materials.size() && materials[m].transmittance > 0.0f;
+    if (!t) {
+      open = false;
+      continue;
+    }
+    if (!open) boxes.emplace_back();
+    open = true;
+    for (const glm::vec3& v : {b.tris[i].v0, b.tris[i].v1, b.tris[i].v2}) boxes.back().extend(v);
+  }
+  while (boxes.size() > cap) {
+    std::vector<core::Aabb> merged;
+    for (size_t i = 0; i < boxes.size(); i += 2) {
+      core::Aabb a = boxes[i];
+      if (i + 1 < boxes.size()) a.extend(boxes[i + 1]);
+      merged.push_back(a);
+    }
+    boxes.swap(merged);
+  }
+  return boxes;
+}
+
+}  // namespace
+
+BartSurfaces::BartSurfaces(const BartAnimation& animation) : anim_(animation) {
+  const AffScene& aff = animation.aff();
+  if (!aff.nodes.empty()) static_boxes_ = transmissive_runs(aff.nodes[0].geometry, aff.materials, 64);
+  const auto& nodes = animation.instance_nodes();
+  for (uint32_t inst = 0; inst < nodes.size(); ++inst) {
+    if (nodes[inst] == 0) continue;
+    core::Aabb box;
+    for (const core::Aabb& b : transmissive_runs(aff.nodes[nodes[inst]].geometry, aff.materials, 1)) box.extend(b);
+    if (!box.empty()) object_boxes_.emplace_back(inst, box);
+  }
+  for (const AffAnimatedTriangle& t : aff.animated_triangles) {
+    unknown_ |= t.material < aff.materials.size() && aff.materials[t.material].transmittance > 0.0f;
+  }
+}
+
+bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {
+  if (unknown_) return false;
+  boxes = static_boxes_;
+  for (const auto& [inst, box] : object_boxes_) {
+    core::Hit h;
+    h.inst = inst;
+    const glm::mat4 m = anim_.scene().world_from_object(h);
+    core::Aabb world;
+    for (int c = 0; c < 8; ++c) {
+      const glm::vec3 corner((c & 1) ? box.hi.x : box.lo.x, (c & 2) ? box.hi.y : box.lo.y, (c & 4) ? box.hi.z : box.lo.z);
+      world.extend(glm::vec3(m * glm::vec4(corner, 1.0f)));
+    }
+    boxes.push_back(world);
+  }
+  return true;
+}
+
+void BartSurfaces::shading(const core::Hit& hit, const core::Triangle&, core::SurfaceInfo& info) const {
+  const TriangleBatch* b = anim_.batch(hit);
+  if (!b || hit.prim >= b->size()) return;
+  const float w = 1.0f - hit.u - hit.v;
+  const auto& n = b->normals[hit.prim];
+  const glm::vec3 object_normal = w * n[0] + hit.u * n[1] + hit.v * n[2];
+  if (hit.inst == core::kStaticObject) {
+    info.normal = object_normal;
+  } else {
+    const glm::mat3 m(anim_.scene().world_from_object(hit));
+    info.normal = glm::transpose(glm::inverse(m)) * object_normal;
+  }
+  const auto& uv = b->uvs[hit.prim];
+  info.uv = w * uv[0] + hit.u * uv[1] + hit.v * uv[2];
+  info.texture = b->texture[hit.prim];
+}
+
+core::ShadingScene make_shading_scene(const BartAnimation& animation, const BartSurfaces& surfaces) {
+  const AffScene& aff = animation.aff();
+  core::ShadingScene s;
+  s.geometry = &animation.scene();
+  s.surfaces = &surfaces;
+  for (const AffMaterial& m : aff.materials) {
+    core::Material c;
+    c.ambient = m.ambient;
+    c.diffuse = m.diffuse;
+    c.specular = m.specular;
+    c.shine = m.shine;
+    c.transmittance = m.transmittance;
+    c.ior = m.ior > 0.0f ? m.ior : 1.0f;
+    s.materials.push_back(c);
+  }
+  if (s.materials.empty()) s.materials.push_back(core::Material{});
+  for (const auto& t : aff.textures) s.textures.push_back(load_ppm(t));
+  for (const AffLight& l : aff.lights) s.lights.push_back({l.position, l.color});
+  s.ambient = aff.ambient;
+  s.background = aff.background;
+  return s;
+}
+
+}  // namespace artrace::io
