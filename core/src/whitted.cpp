@@ -109,7 +109,11 @@ class WaveTracer {
  public:
   WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const std::vector<Aabb>* boxes)
       : s_(s), o_(o), c_(c), boxes_(boxes) {
-    for (const Material& m : s.materials) transmissive_ |= m.transmittance > 0.0f;
+    for (const Material& m : s.materials) {
+      transmissive_ |= m.transmittance > 0.0f;
+      // below this cosine the highlight is under 1e-4 of the specular colour: not worth a pow()
+      highlight_cos_.push_back(m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f);
+    }
   }
 
   /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
@@ -201,10 +205,10 @@ class WaveTracer {
         const float ndl = glm::dot(q.ns, l);
         if (ndl <= 0.0f || glm::dot(q.ng, l) <= 0.0f) continue;
         glm::vec3 c = q.diffuse * ndl;
-        if (q.m->shine > 0.0f && max3(q.specular) > 0.0f) {
-          const glm::vec3 refl = 2.0f * ndl * q.ns - l;
-          const float rv = glm::dot(refl, q.view);
-          if (rv > 0.0f) c += q.specular * std::pow(rv, q.m->shine);
+        const float min_cos = highlight_cos_[static_cast<size_t>(q.m - s_.materials.data())];
+        if (min_cos < 1.0f && max3(q.specular) > 0.0f) {
+          const float rv = glm::dot(2.0f * ndl * q.ns - l, q.view);
+          if (rv > min_cos) c += q.specular * std::pow(rv, q.m->shine);
         }
         contrib[i] = c * light.color;
         lit |= 1u << i;
@@ -329,6 +333,7 @@ class WaveTracer {
   const WhittedOptions& o_;
   Counters& c_;
   const std::vector<Aabb>* boxes_;
+  std::vector<float> highlight_cos_;  ///< per material
   bool transmissive_ = false;
 };
 
