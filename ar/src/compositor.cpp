@@ -1,9 +1,11 @@
 #include "artrace/ar/compositor.h"
 
 #include "artrace/core/renderer.h"
+#include "artrace/core/whitted.h"
 #include "artrace/core/srgb.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -15,11 +17,14 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-/// Offsets a secondary ray's origin off the surface, scaled to the hit point's magnitude (a
-/// global epsilon fails for scenes far from the origin or tiny ones).
-glm::vec3 offset(const glm::vec3& p, const glm::vec3& n, bool outward) {
-  const float scale = 1e-4f * std::max(1.0f, std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}));
-  return p + (outward ? scale : -scale) * n;
+float max_coord(const core::Triangle& t) {
+  auto m = [](const glm::vec3& v) { return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}); };
+  return std::max({m(t.v0), m(t.v1), m(t.v2)});
+}
+
+glm::vec3 pixel_linear(const ColorImage& img, int x, int y) {
+  const uint8_t* px = img.at(x, y);
+  return {core::srgb8_to_linear(px[0]), core::srgb8_to_linear(px[1]), core::srgb8_to_linear(px[2])};
 }
 
 struct Shader {
@@ -28,10 +33,11 @@ struct Shader {
   const MaterialLookup& material;
   const CompositeOptions& opt;
   const std::vector<VirtualLight>& lights;
+  const DepthProxy* proxy;  ///< null: no depth mesh
   core::Camera cam;
 
-  /// The recorded colour seen along a ray that left the virtual objects: the point at the sensor
-  /// depth of the pixel it projects to (or 2 m on) is looked up in the colour frame.
+  /// The recorded colour seen along a ray that left the virtual objects where the depth mesh has
+  /// nothing: the point 2 m (or 1 m, 0.5 m) on is looked up in the colour frame.
   glm::vec3 background(const glm::vec3& org, const glm::vec3& dir) const {
     const glm::vec3 d = glm::normalize(dir);
     for (const float dist : {2.0f, 1.0f, 0.5f}) {
@@ -40,8 +46,7 @@ struct Shader {
       if (c.z <= 0.05f) continue;
       const int x = static_cast<int>(cam.fx * c.x / c.z + cam.cx), y = static_cast<int>(cam.fy * c.y / c.z + cam.cy);
       if (x < 0 || y < 0 || x >= frame.color.width || y >= frame.color.height) continue;
-      const uint8_t* px = frame.color.at(x, y);
-      return {core::srgb8_to_linear(px[0]), core::srgb8_to_linear(px[1]), core::srgb8_to_linear(px[2])};
+      return pixel_linear(frame.color, x, y);
     }
     return glm::vec3(0.5f);
   }
@@ -51,7 +56,8 @@ struct Shader {
     glm::vec3 n = glm::normalize(tri.geometric_normal());
     const bool front = glm::dot(n, ray.dir) < 0.0f;
     if (!front) n = -n;
-    const glm::vec3 p = ray.org + hit.t * ray.dir;
+    const glm::vec3 p = tri.v0 * (1.0f - hit.u - hit.v) + tri.v1 * hit.u + tri.v2 * hit.v;
+    const float magnitude = max_coord(tri);
     const VirtualMaterial m = material(hit);
     if (m.kind == VirtualMaterial::kDiffuse || depth >= 2) {
       glm::vec3 c = opt.ambient * m.color;
@@ -59,31 +65,137 @@ struct Shader {
         const glm::vec3 to = l.position - p;
         const float cosine = glm::dot(n, glm::normalize(to));
         if (cosine <= 0.0f) continue;
-        if (opt.shadows && scene.occluded(core::Ray{offset(p, n, true), to, 0.0f, 1.0f})) continue;
+        if (opt.shadows) {
+          const glm::vec3 o = core::offset_ray_origin(p, n, magnitude);
+          if (scene.occluded(core::Ray{o, l.position - o, 0.0f, 1.0f})) continue;
+        }
         c += m.color * l.color * cosine;
       }
       return c;
     }
     const glm::vec3 d = glm::normalize(ray.dir);
-    const glm::vec3 refl_dir = glm::reflect(d, n);
     auto trace = [&](const glm::vec3& o, const glm::vec3& dir) {
       const core::Ray r{o, dir};
       const core::Hit h = scene.intersect(r);
+      float t_real;
+      glm::vec3 real;
+      if (proxy && proxy->intersect(r, t_real, real) && (!h.valid() || t_real < h.t)) return real;
       return h.valid() ? shade(r, h, depth + 1) : background(o, dir);
     };
-    const glm::vec3 reflected = trace(offset(p, n, true), refl_dir);
+    const glm::vec3 reflected = trace(core::offset_ray_origin(p, n, magnitude), glm::reflect(d, n));
     if (m.kind == VirtualMaterial::kMirror) return m.color * reflected;
-    // glass: Fresnel (Schlick) between reflection and refraction; total internal reflection handled
+    // glass: Fresnel between reflection and refraction; total internal reflection reflects all
     const float eta = front ? 1.0f / m.ior : m.ior;
-    const float cos_i = -glm::dot(d, n);
-    const float r0 = (1.0f - m.ior) / (1.0f + m.ior);
-    const float fresnel = r0 * r0 + (1.0f - r0 * r0) * std::pow(1.0f - cos_i, 5.0f);
-    const glm::vec3 refr_dir = glm::refract(d, n, eta);
-    if (glm::dot(refr_dir, refr_dir) == 0.0f) return reflected;  // total internal reflection
-    const glm::vec3 refracted = trace(offset(p, n, false), refr_dir);
+    const float fresnel = core::fresnel_dielectric(-glm::dot(d, n), eta);
+    glm::vec3 refr_dir;
+    if (!core::refract_direction(d, n, eta, refr_dir)) return reflected;
+    const glm::vec3 refracted = trace(core::offset_ray_origin(p, -n, magnitude), refr_dir);
     return fresnel * reflected + (1.0f - fresnel) * m.color * refracted;
   }
 };
+
+/// Whether the segment from `o` along `d` (t in [0, 1]) meets the box.
+bool segment_meets(const glm::vec3& o, const glm::vec3& d, const core::Aabb& b) {
+  float t0 = 0.0f, t1 = 1.0f;
+  for (int a = 0; a < 3; ++a) {
+    const float inv = 1.0f / d[a];
+    float n = (b.lo[a] - o[a]) * inv, f = (b.hi[a] - o[a]) * inv;
+    if (n > f) std::swap(n, f);
+    t0 = std::max(t0, n);
+    t1 = std::min(t1, f);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+/// Differential rendering of the virtual objects' shadows on the real surfaces: per pixel the
+/// factor (ambient + unblocked light) / (ambient + all light), 1 where nothing changes.
+/// A light that reaches a real point only through virtual objects but is blocked by the real
+/// scene too (a floor under a real table) was not reaching it in the recording either: it changes
+/// nothing. The depth mesh tells, from a few centimetres off the point (the mesh is coarser than
+/// the depth map, so it is not asked about the point's own surface).
+std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core::TwoLevelScene& scene,
+                                           const DepthProxy* proxy, const std::vector<VirtualLight>& lights,
+                                           const CompositeOptions& opt, CompositeStats& st) {
+  // small holes filled first, so a noisy depth map does not leave unshadowed specks
+  const OcclusionOptions& oo = opt.occlusion_options;
+  const DepthImage d = fill_depth_holes(frame.depth, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
+  const int w = d.width, h = d.height;
+  std::vector<glm::vec3> factor(static_cast<size_t>(w) * h, glm::vec3(1.0f));
+  const core::Aabb bounds = scene.bounds();
+  const Eigen::Isometry3d pose = frame.world_from_camera.value_or(Eigen::Isometry3d::Identity());
+  const PinholeIntrinsics& k = frame.color_intrinsics;
+  const Eigen::Matrix3f rot = pose.rotation().cast<float>();
+  const Eigen::Vector3f tr = pose.translation().cast<float>();
+  auto point = [&](int x, int y, glm::vec3& p) {
+    const float z = d.at(x, y);
+    if (z <= 0.0f) return false;
+    const Eigen::Vector3f c(static_cast<float>((x - k.cx) / k.fx) * z, static_cast<float>((y - k.cy) / k.fy) * z, z);
+    const Eigen::Vector3f q = rot * c + tr;
+    p = glm::vec3(q.x(), q.y(), q.z());
+    return true;
+  };
+  std::atomic<int> rays{0}, darkened{0};
+  core::for_each_tile(w, h, opt.threads, [&](const core::Tile& t) {
+    int local_rays = 0, local_dark = 0;
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) {
+        glm::vec3 p;
+        if (!point(x, y, p)) continue;
+        // normal of the depth map from neighbours 2 pixels away (less noise), facing the camera;
+        // unknown at holes and image borders
+        constexpr int r = 2;
+        glm::vec3 n(0.0f), px0, px1, py0, py1;
+        if (x >= r && y >= r && x + r < w && y + r < h && point(x - r, y, px0) && point(x + r, y, px1) &&
+            point(x, y - r, py0) && point(x, y + r, py1)) {
+          n = glm::cross(py1 - py0, px1 - px0);
+          const float len = glm::length(n);
+          n = len > 0.0f ? n / len : glm::vec3(0.0f);
+          const glm::vec3 eye(static_cast<float>(tr.x()), static_cast<float>(tr.y()), static_cast<float>(tr.z()));
+          if (glm::dot(n, eye - p) < 0.0f) n = -n;
+        }
+        glm::vec3 all(opt.ambient), lit(opt.ambient);
+        bool blocked_any = false;
+        for (const VirtualLight& l : lights) {
+          const glm::vec3 to = l.position - p;
+          const float dist = glm::length(to);
+          if (!(dist > 0.0f)) continue;
+          const float cosine = glm::dot(n, n) > 0.0f ? glm::dot(n, to / dist) : 1.0f;
+          if (cosine <= 0.0f) continue;
+          all += l.color * cosine;
+          bool blocked = false;
+          if (segment_meets(p, to, bounds)) {
+            ++local_rays;
+            const glm::vec3 side = glm::dot(n, n) > 0.0f ? n : to / dist;
+            const glm::vec3 o = core::offset_ray_origin(p, side);
+            blocked = scene.occluded(core::Ray{o, l.position - o, 0.0f, 1.0f});
+          }
+          if (blocked && proxy && !proxy->empty() && dist > 0.05f) {
+            const glm::vec3 l_dir = to / dist;
+            if (proxy->scene().occluded(core::Ray{p + 0.04f * l_dir, l_dir, 0.0f, dist - 0.04f})) {
+              all -= l.color * cosine;  // the real scene already shadows this point from this light
+              continue;
+            }
+          }
+          if (blocked) {
+            blocked_any = true;
+          } else {
+            lit += l.color * cosine;
+          }
+        }
+        if (blocked_any) {
+          factor[static_cast<size_t>(y) * w + x] = lit / all;
+          ++local_dark;
+        }
+      }
+    }
+    rays += local_rays;
+    darkened += local_dark;
+  });
+  st.shadow_rays_real = rays;
+  st.shadowed_real_pixels = darkened;
+  return factor;
+}
 
 }  // namespace
 
@@ -108,9 +220,16 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const int w = frame.color.width, h = frame.color.height;
   const core::Camera cam = make_camera(frame.color_intrinsics, frame.world_from_camera.value_or(Eigen::Isometry3d::Identity()));
   const std::vector<VirtualLight> lights = opt.lights.empty() ? std::vector<VirtualLight>{estimate_light(frame)} : opt.lights;
-  Shader shader{frame, scene, material, opt, lights, cam};
   ColorImage out = frame.color;
   CompositeStats st;
+  const bool have_depth = frame.depth.width == w && frame.depth.height == h;
+  DepthProxy local_proxy;
+  DepthProxy* proxy = nullptr;
+  if ((opt.real_reflections || (opt.shadows && opt.real_shadows)) && have_depth && !scene.bounds().empty()) {
+    proxy = opt.proxy ? opt.proxy : &local_proxy;
+    st.proxy_ms = proxy->update(frame);
+  }
+  Shader shader{frame, scene, material, opt, lights, opt.real_reflections ? proxy : nullptr, cam};
 
   // Screen rectangle of the virtual objects' bounds: only those tiles are traced.
   int x0 = 0, y0 = 0, x1 = w, y1 = h;
@@ -139,6 +258,19 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     x1 = std::clamp(static_cast<int>(std::ceil(maxx)) + 1, 0, w);
     y0 = std::clamp(static_cast<int>(std::floor(miny)) - 1, 0, h);
     y1 = std::clamp(static_cast<int>(std::ceil(maxy)) + 1, 0, h);
+  }
+  // the virtual objects' shadows on the real surfaces (they may fall outside the objects' rectangle)
+  std::vector<glm::vec3> shadow;
+  if (opt.shadows && opt.real_shadows && have_depth) {
+    const auto ts = std::chrono::steady_clock::now();
+    shadow = real_shadow_factors(frame, scene, proxy, lights, opt, st);
+    st.real_shadow_ms = ms_since(ts);
+    if (st.shadowed_real_pixels > 0) {
+      for (size_t i = 0; i < shadow.size(); ++i) {
+        if (shadow[i] == glm::vec3(1.0f)) continue;
+        for (int c = 0; c < 3; ++c) out.rgb[3 * i + c] = core::linear_to_srgb8(core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * shadow[i][c]);
+      }
+    }
   }
   if (x0 >= x1 || y0 >= y1) {
     if (stats) *stats = st;
@@ -189,7 +321,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       const size_t i = static_cast<size_t>(y) * w + x;
       if (alpha[i] <= 0.0f) continue;
       for (int c = 0; c < 3; ++c) {
-        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]);
+        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow.empty() ? 1.0f : shadow[i][c]);
         out.rgb[3 * i + c] = core::linear_to_srgb8(alpha[i] * colour[i][c] + (1.0f - alpha[i]) * real);
       }
     }

@@ -1,0 +1,45 @@
+// The real scene as geometry, from the sensor's depth map, for the effects virtual objects have on
+// it and it has on them:
+//   - receivers: every pixel's depth point, with a normal from the depth gradient, receives the
+//     virtual objects' shadows (differential rendering in compositor.cpp);
+//   - a depth mesh: the depth map sampled every `step` pixels as a triangle grid in world space, a
+//     deformable mesh in its own two-level scene, rebuilt each frame (lazily: only the parts rays
+//     reach are built). Triangles across depth discontinuities (a jump of more than
+//     `max_jump` x depth) or with a hole at a corner are left out. Reflection and refraction rays
+//     leaving the virtual objects meet it and take the recorded colour where they hit.
+#pragma once
+
+#include "artrace/ar/sensor_frame.h"
+#include "artrace/core/two_level_scene.h"
+
+#include <memory>
+
+namespace artrace::ar {
+
+class DepthProxy {
+ public:
+  explicit DepthProxy(int step = 4, float max_jump = 0.05f);
+
+  /// Takes the frame's depth (registered to the colour camera) and pose. Returns milliseconds.
+  double update(const SensorFrame& frame);
+
+  /// The depth mesh (empty when the frame has no depth).
+  const core::TwoLevelScene& scene() const { return scene_; }
+  bool empty() const { return triangles_ == 0; }
+  size_t triangles() const { return triangles_; }
+
+  /// Closest hit of a world-space ray with the depth mesh; the recorded colour there (linear RGB)
+  /// when it hits.
+  bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const;
+
+ private:
+  int step_;
+  float max_jump_;
+  const SensorFrame* frame_ = nullptr;
+  core::TwoLevelScene scene_{core::TwoLevelScene::Config::kBvh};
+  core::DeformableHandle mesh_;
+  bool has_mesh_ = false;
+  size_t triangles_ = 0;
+};
+
+}  // namespace artrace::ar
