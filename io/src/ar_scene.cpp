@@ -138,18 +138,44 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
 namespace artrace::io {
 
 ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
+  std::vector<core::Triangle> fixed;
   for (size_t p = 0; p < file.models.size(); ++p) {
     const GltfModel& model = file.loaded[p];
-    std::vector<core::MeshHandle> meshes;
-    for (const GltfMesh& m : model.meshes) meshes.push_back(scene_.add_rigid_mesh(m.tris));
+    const ArModelPlacement& place = file.models[p];
+    const bool animated = place.clip >= 0 && place.clip < static_cast<int>(model.animations.size());
+    const std::vector<glm::mat4> rest = model.node_transforms(-1, 0.0f);
+    std::vector<core::MeshHandle> meshes(model.meshes.size());
     for (size_t n = 0; n < model.nodes.size(); ++n) {
       const int mesh = model.nodes[n].mesh;
       if (mesh < 0 || model.meshes[mesh].tris.empty()) continue;
-      const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
-      if (parts_.size() <= h.index) parts_.resize(h.index + 1);
-      parts_[h.index] = Part{p, static_cast<int>(n), mesh, h};
+      const GltfMesh& gm = model.meshes[mesh];
+      if (model.nodes[n].skin >= 0) {
+        // a deforming mesh: skinned on every update
+        core::TriangleMesh tm;
+        tm.positions = gm.positions;
+        tm.indices = gm.indices;
+        const core::DeformableHandle h = scene_.add_deformable(std::move(tm));
+        if (skinned_.size() <= h.index) skinned_.resize(h.index + 1);
+        skinned_[h.index] = Skinned{p, static_cast<int>(n), mesh, model.nodes[n].skin, h};
+      } else if (!animated) {
+        // static: into the kd-tree, in world space
+        const glm::mat4 m = place.world_from_model() * rest[n];
+        for (uint32_t t = 0; t < gm.tris.size(); ++t) {
+          const core::Triangle& tri = gm.tris[t];
+          fixed.push_back({glm::vec3(m * glm::vec4(tri.v0, 1.0f)), glm::vec3(m * glm::vec4(tri.v1, 1.0f)),
+                           glm::vec3(m * glm::vec4(tri.v2, 1.0f))});
+          static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t});
+        }
+      } else {
+        // hierarchically transformed: an instance of the mesh, moved by the node animation
+        if (meshes[mesh].index == core::kInvalidId) meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
+        const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
+        if (parts_.size() <= h.index) parts_.resize(h.index + 1);
+        parts_[h.index] = Part{p, static_cast<int>(n), mesh, h};
+      }
     }
   }
+  scene_.set_static(std::move(fixed));
   update(0.0);
 }
 
@@ -161,17 +187,38 @@ double ArRuntime::update(double time_s) {
     nodes[p] = file_.loaded[p].node_transforms(m.clip, static_cast<float>(time_s * m.speed));
   }
   for (const Part& part : parts_) {
+    if (part.mesh < 0) continue;
     scene_.set_transform(part.instance, file_.models[part.placement].world_from_model() * nodes[part.placement][part.node]);
+  }
+  for (const Skinned& s : skinned_) {
+    if (s.mesh < 0) continue;
+    const glm::mat4 world = file_.models[s.placement].world_from_model();
+    const std::vector<glm::vec3> v = file_.loaded[s.placement].skinned_positions(s.mesh, s.skin, nodes[s.placement]);
+    core::DeformableMesh& d = scene_.deformable(s.handle);
+    for (size_t i = 0; i < v.size(); ++i) d.positions()[i] = glm::vec3(world * glm::vec4(v[i], 1.0f));
+    d.restructure();
   }
   scene_.commit();
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
 ar::VirtualMaterial ArRuntime::material(const core::Hit& hit) const {
+  if (hit.inst == core::kStaticObject) {
+    const StaticTriangle& s = static_parts_.at(hit.prim);
+    return material_of(s.placement, static_cast<int>(s.mesh), s.triangle);
+  }
+  if (hit.inst & 0x80000000u) {
+    const Skinned& s = skinned_.at(hit.inst & 0x7fffffffu);
+    return material_of(s.placement, s.mesh, hit.prim);
+  }
   const Part& part = parts_.at(hit.inst);
-  const ArModelPlacement& place = file_.models[part.placement];
-  const GltfModel& model = file_.loaded[part.placement];
-  const GltfMaterial& g = model.materials[model.meshes[part.mesh].material.at(hit.prim)];
+  return material_of(part.placement, part.mesh, hit.prim);
+}
+
+ar::VirtualMaterial ArRuntime::material_of(size_t placement, int mesh, uint32_t triangle) const {
+  const ArModelPlacement& place = file_.models[placement];
+  const GltfModel& model = file_.loaded[placement];
+  const GltfMaterial& g = model.materials[model.meshes.at(static_cast<size_t>(mesh)).material.at(triangle)];
   ar::VirtualMaterial m;
   m.color = place.base_color.value_or(g.base_color);
   m.ior = place.ior.value_or(g.ior);

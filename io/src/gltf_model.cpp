@@ -96,6 +96,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   }
   for (const tinygltf::Mesh& mesh : m.meshes) {
     GltfMesh gm;
+    bool any_skinned = false, any_plain = false;
     for (const tinygltf::Primitive& prim : mesh.primitives) {
       if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != -1) continue;  // points and lines are not rendered
       const auto pos_it = prim.attributes.find("POSITION");
@@ -108,15 +109,36 @@ GltfModel load_gltf(const std::filesystem::path& path) {
       if (idx.size() % 3) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': index count is not a multiple of 3");
       const uint32_t material = prim.material >= 0 ? static_cast<uint32_t>(prim.material + 1) : 0u;
       if (material >= out.materials.size()) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' names material " + std::to_string(prim.material) + ", which does not exist");
+      const uint32_t base = static_cast<uint32_t>(gm.positions.size());
+      for (size_t k = 0; k < nv; ++k) gm.positions.emplace_back(pos[3 * k], pos[3 * k + 1], pos[3 * k + 2]);
+      const auto j_it = prim.attributes.find("JOINTS_0"), w_it = prim.attributes.find("WEIGHTS_0");
+      if ((j_it == prim.attributes.end()) != (w_it == prim.attributes.end())) {
+        throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' has JOINTS_0 without WEIGHTS_0 or the reverse");
+      }
+      if (j_it != prim.attributes.end()) {
+        any_skinned = true;
+        const std::vector<float> j = read_floats(m, j_it->second, 4, file), w = read_floats(m, w_it->second, 4, file);
+        if (j.size() != 4 * nv || w.size() != 4 * nv) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': JOINTS_0/WEIGHTS_0 count differs from POSITION");
+        gm.joints.resize(gm.positions.size() - nv);
+        gm.weights.resize(gm.positions.size() - nv);
+        for (size_t k = 0; k < nv; ++k) {
+          gm.joints.emplace_back(j[4 * k], j[4 * k + 1], j[4 * k + 2], j[4 * k + 3]);
+          gm.weights.emplace_back(w[4 * k], w[4 * k + 1], w[4 * k + 2], w[4 * k + 3]);
+        }
+      } else {
+        any_plain = true;
+      }
       for (size_t k = 0; k < idx.size(); k += 3) {
         for (int c = 0; c < 3; ++c) {
           if (idx[k + c] >= nv) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': index " + std::to_string(idx[k + c]) + " past its " + std::to_string(nv) + " vertices");
         }
         auto v = [&](uint32_t i) { return glm::vec3(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]); };
         gm.tris.push_back({v(idx[k]), v(idx[k + 1]), v(idx[k + 2])});
+        gm.indices.emplace_back(base + idx[k], base + idx[k + 1], base + idx[k + 2]);
         gm.material.push_back(material);
       }
     }
+    if (any_skinned && any_plain) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' mixes skinned and unskinned primitives");
     out.meshes.push_back(std::move(gm));
   }
   // nodes: order parents before children (glTF does not promise it)
@@ -145,6 +167,9 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     g.parent = parent[n] >= 0 ? new_index[parent[n]] : -1;
     g.mesh = src.mesh;
     if (g.mesh >= static_cast<int>(out.meshes.size())) throw ParseError(file, 0, 0, "node '" + src.name + "' names a mesh that does not exist");
+    g.skin = src.skin;
+    if (g.skin >= static_cast<int>(m.skins.size())) throw ParseError(file, 0, 0, "node '" + src.name + "' names a skin that does not exist");
+    if (g.skin >= 0 && (g.mesh < 0 || !out.meshes[g.mesh].skinned())) throw ParseError(file, 0, 0, "node '" + src.name + "' has a skin but no mesh with JOINTS_0/WEIGHTS_0");
     if (src.matrix.size() == 16) {
       g.has_matrix = true;
       for (int k = 0; k < 16; ++k) glm::value_ptr(g.matrix)[k] = static_cast<float>(src.matrix[k]);
@@ -153,6 +178,31 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     if (src.rotation.size() == 4) g.rotation = glm::quat(static_cast<float>(src.rotation[3]), static_cast<float>(src.rotation[0]), static_cast<float>(src.rotation[1]), static_cast<float>(src.rotation[2]));
     if (src.scale.size() == 3) g.scale = glm::vec3(src.scale[0], src.scale[1], src.scale[2]);
     out.nodes.push_back(g);
+  }
+  for (const tinygltf::Skin& sk : m.skins) {
+    GltfSkin gs;
+    gs.name = sk.name;
+    for (const int j : sk.joints) {
+      if (j < 0 || j >= static_cast<int>(m.nodes.size())) throw ParseError(file, 0, 0, "skin '" + sk.name + "' names joint node " + std::to_string(j) + ", which does not exist");
+      gs.joints.push_back(new_index[j]);
+    }
+    if (sk.inverseBindMatrices >= 0) {
+      const std::vector<float> ib = read_floats(m, sk.inverseBindMatrices, 16, file);
+      if (ib.size() != 16 * gs.joints.size()) throw ParseError(file, 0, 0, "skin '" + sk.name + "': inverseBindMatrices count differs from its joints");
+      for (size_t k = 0; k < gs.joints.size(); ++k) gs.inverse_bind.push_back(glm::make_mat4(&ib[16 * k]));
+    } else {
+      gs.inverse_bind.assign(gs.joints.size(), glm::mat4(1.0f));
+    }
+    out.skins.push_back(std::move(gs));
+  }
+  for (const GltfNode& n : out.nodes) {
+    if (n.skin < 0) continue;
+    const size_t joints = out.skins[n.skin].joints.size();
+    for (const glm::uvec4& j : out.meshes[n.mesh].joints) {
+      if (j.x >= joints || j.y >= joints || j.z >= joints || j.w >= joints) {
+        throw ParseError(file, 0, 0, "node '" + n.name + "': a vertex names joint " + std::to_string(std::max({j.x, j.y, j.z, j.w})) + " of a skin with " + std::to_string(joints));
+      }
+    }
   }
   for (const tinygltf::Animation& a : m.animations) {
     GltfAnimation ga;
@@ -239,6 +289,26 @@ std::vector<glm::mat4> GltfModel::node_transforms(int clip, float t) const {
     world[i] = nodes[i].parent >= 0 ? world[nodes[i].parent] * local : local;
   }
   return world;
+}
+
+std::vector<glm::vec3> GltfModel::skinned_positions(int mesh, int skin, const std::vector<glm::mat4>& node_world) const {
+  const GltfMesh& m = meshes.at(static_cast<size_t>(mesh));
+  const GltfSkin& s = skins.at(static_cast<size_t>(skin));
+  std::vector<glm::mat4> joint(s.joints.size());
+  for (size_t j = 0; j < joint.size(); ++j) joint[j] = node_world.at(static_cast<size_t>(s.joints[j])) * s.inverse_bind[j];
+  std::vector<glm::vec3> out(m.positions.size());
+  for (size_t v = 0; v < out.size(); ++v) {
+    const glm::vec4 w = m.weights[v];
+    const float sum = w.x + w.y + w.z + w.w;
+    if (!(sum > 0.0f)) {
+      out[v] = m.positions[v];  // no weights: the bind pose
+      continue;
+    }
+    const glm::mat4 blend = (w.x * joint[m.joints[v].x] + w.y * joint[m.joints[v].y] + w.z * joint[m.joints[v].z] +
+                             w.w * joint[m.joints[v].w]) / sum;
+    out[v] = glm::vec3(blend * glm::vec4(m.positions[v], 1.0f));
+  }
+  return out;
 }
 
 size_t GltfModel::triangle_count() const {

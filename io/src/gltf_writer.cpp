@@ -2,6 +2,10 @@
 
 #include <tiny_gltf.h>
 
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/type_ptr.hpp>
+
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -60,14 +64,23 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
     tinygltf::Mesh mesh;
     // one primitive per material, vertices unshared (flat facets)
     for (size_t mat = 0; mat < model.materials.size(); ++mat) {
-      std::vector<float> pos;
+      std::vector<float> pos, weights;
+      std::vector<uint16_t> joints;
       glm::vec3 lo(INFINITY), hi(-INFINITY);
       for (size_t t = 0; t < gm.tris.size(); ++t) {
         if (gm.material[t] != mat) continue;
-        for (const glm::vec3& v : {gm.tris[t].v0, gm.tris[t].v1, gm.tris[t].v2}) {
+        for (int c = 0; c < 3; ++c) {
+          const glm::vec3 v = c == 0 ? gm.tris[t].v0 : c == 1 ? gm.tris[t].v1 : gm.tris[t].v2;
           pos.insert(pos.end(), {v.x, v.y, v.z});
           lo = glm::min(lo, v);
           hi = glm::max(hi, v);
+          if (gm.skinned()) {
+            const uint32_t i = gm.indices[t][c];
+            for (int k = 0; k < 4; ++k) {
+              joints.push_back(static_cast<uint16_t>(gm.joints[i][k]));
+              weights.push_back(gm.weights[i][k]);
+            }
+          }
         }
       }
       if (pos.empty()) continue;
@@ -75,6 +88,12 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
       p.mode = TINYGLTF_MODE_TRIANGLES;
       p.attributes["POSITION"] = add_accessor(m, pos.data(), pos.size() * 4, pos.size() / 3, TINYGLTF_TYPE_VEC3,
                                               TINYGLTF_COMPONENT_TYPE_FLOAT, {lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z});
+      if (gm.skinned()) {
+        p.attributes["JOINTS_0"] = add_accessor(m, joints.data(), joints.size() * 2, joints.size() / 4, TINYGLTF_TYPE_VEC4,
+                                                TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
+        p.attributes["WEIGHTS_0"] = add_accessor(m, weights.data(), weights.size() * 4, weights.size() / 4, TINYGLTF_TYPE_VEC4,
+                                                 TINYGLTF_COMPONENT_TYPE_FLOAT);
+      }
       p.material = mat == 0 ? -1 : static_cast<int>(mat - 1);
       mesh.primitives.push_back(p);
     }
@@ -85,11 +104,22 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
     tinygltf::Node n;
     n.name = g.name;
     n.mesh = g.mesh;
+    n.skin = g.skin;
     n.translation = {g.translation.x, g.translation.y, g.translation.z};
     n.rotation = {g.rotation.x, g.rotation.y, g.rotation.z, g.rotation.w};
     n.scale = {g.scale.x, g.scale.y, g.scale.z};
     m.nodes.push_back(n);
     if (g.parent >= 0) m.nodes[g.parent].children.push_back(static_cast<int>(i));
+  }
+  for (const GltfSkin& gs : model.skins) {
+    tinygltf::Skin sk;
+    sk.name = gs.name;
+    sk.joints = gs.joints;
+    std::vector<float> ib;
+    for (const glm::mat4& mtx : gs.inverse_bind) ib.insert(ib.end(), glm::value_ptr(mtx), glm::value_ptr(mtx) + 16);
+    sk.inverseBindMatrices = add_accessor(m, ib.data(), ib.size() * 4, gs.inverse_bind.size(), TINYGLTF_TYPE_MAT4,
+                                          TINYGLTF_COMPONENT_TYPE_FLOAT);
+    m.skins.push_back(sk);
   }
   tinygltf::Scene scene;
   for (size_t i = 0; i < model.nodes.size(); ++i) {
@@ -194,6 +224,74 @@ GltfModel make_glass_sphere(float radius) {
   node.name = "sphere";
   node.mesh = 0;
   m.nodes.push_back(node);
+  return m;
+}
+
+GltfModel make_bending_tube(float length, float width, const glm::vec3& color) {
+  GltfModel m;
+  m.materials.resize(2);
+  m.materials[1].name = "rubber";
+  m.materials[1].base_color = color;
+  m.materials[1].roughness = 0.7f;
+  GltfMesh mesh;
+  constexpr int kRings = 12;
+  const float h = 0.5f * width;
+  const glm::vec2 corner[4] = {{-h, -h}, {h, -h}, {h, h}, {-h, h}};
+  for (int r = 0; r <= kRings; ++r) {
+    const float y = length * static_cast<float>(r) / kRings;
+    // weight of the elbow: 0 below a third of the length, 1 above two thirds, linear between
+    const float w = std::clamp((y / length - 1.0f / 3.0f) * 3.0f, 0.0f, 1.0f);
+    for (const glm::vec2& c : corner) {
+      mesh.positions.emplace_back(c.x, y, c.y);
+      mesh.joints.emplace_back(0, 1, 0, 0);
+      mesh.weights.emplace_back(1.0f - w, w, 0.0f, 0.0f);
+    }
+  }
+  auto quad = [&](uint32_t a, uint32_t b, uint32_t c, uint32_t d) {
+    mesh.indices.emplace_back(a, b, c);
+    mesh.indices.emplace_back(a, c, d);
+  };
+  for (uint32_t r = 0; r < kRings; ++r) {
+    for (uint32_t k = 0; k < 4; ++k) {
+      const uint32_t a = 4 * r + k, b = 4 * r + (k + 1) % 4;
+      quad(a, a + 4, b + 4, b);
+    }
+  }
+  quad(0, 1, 2, 3);
+  const uint32_t top = 4 * kRings;
+  quad(top, top + 3, top + 2, top + 1);
+  for (const glm::uvec3& t : mesh.indices) {
+    mesh.tris.push_back({mesh.positions[t.x], mesh.positions[t.y], mesh.positions[t.z]});
+    mesh.material.push_back(1);
+  }
+  m.meshes.push_back(mesh);
+  GltfNode root, elbow, body;
+  root.name = "root";
+  elbow.name = "elbow";
+  elbow.parent = 0;
+  elbow.translation = glm::vec3(0.0f, 0.5f * length, 0.0f);
+  body.name = "tube";
+  body.mesh = 0;
+  body.skin = 0;
+  m.nodes = {root, elbow, body};
+  GltfSkin skin;
+  skin.name = "arm";
+  skin.joints = {0, 1};
+  skin.inverse_bind = {glm::mat4(1.0f), glm::translate(glm::mat4(1.0f), glm::vec3(0.0f, -0.5f * length, 0.0f))};
+  m.skins.push_back(skin);
+  GltfAnimation bend;
+  bend.name = "bend";
+  GltfChannel c;
+  c.node = 1;
+  c.path = GltfChannel::kRotation;
+  for (int k = 0; k <= 2; ++k) {
+    c.times.push_back(static_cast<float>(k));
+    const glm::quat q = glm::angleAxis(glm::radians(k == 1 ? 90.0f : 0.0f), glm::vec3(0, 0, 1));
+    c.values.push_back(glm::vec4(q.x, q.y, q.z, q.w));
+  }
+  bend.channels.push_back(c);
+  bend.duration_s = 2.0f;
+  m.animations.push_back(bend);
   return m;
 }
 

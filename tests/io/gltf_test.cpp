@@ -1,3 +1,4 @@
+#include "artrace/io/ar_scene.h"
 #include "artrace/io/gltf_model.h"
 #include "artrace/io/parse_error.h"
 #include "../test_util.h"
@@ -86,6 +87,93 @@ TEST(Gltf, BrokenFilesNameTheFile) {
       EXPECT_NE(std::string(e.what()).find((dir / name).string()), std::string::npos) << e.what();
     }
   }
+  std::filesystem::remove_all(dir);
+}
+
+/// Linear blend skinning of the tube worked out by hand: below a third of the length the root
+/// holds the vertex, above two thirds the elbow (at half the length) turns it about z.
+glm::vec3 bent_tube_vertex(const glm::vec3& v, float length, float degrees) {
+  const float w = std::clamp((v.y / length - 1.0f / 3.0f) * 3.0f, 0.0f, 1.0f);
+  const glm::vec3 elbow(0.0f, 0.5f * length, 0.0f);
+  const float a = glm::radians(degrees);
+  const glm::vec3 d = v - elbow;
+  const glm::vec3 turned = elbow + glm::vec3(std::cos(a) * d.x - std::sin(a) * d.y, std::sin(a) * d.x + std::cos(a) * d.y, d.z);
+  return (1.0f - w) * v + w * turned;
+}
+
+TEST(Gltf, SkinnedMeshBendsAsLinearBlendSkinningSays) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf_skin";
+  const float length = 1.2f;
+  for (const char* name : {"tube.gltf", "tube.glb"}) {
+    write_gltf(make_bending_tube(length, 0.2f, {0.2f, 0.4f, 0.9f}), dir / name);
+    const GltfModel m = load_gltf(dir / name);
+    ASSERT_EQ(m.skins.size(), 1u);
+    ASSERT_EQ(m.skins[0].joints.size(), 2u);
+    ASSERT_TRUE(m.meshes[0].skinned());
+    int skinned_node = -1;
+    for (size_t n = 0; n < m.nodes.size(); ++n) {
+      if (m.nodes[n].skin >= 0) skinned_node = static_cast<int>(n);
+    }
+    ASSERT_GE(skinned_node, 0);
+    for (const float t : {0.0f, 0.5f, 1.0f, 1.5f}) {
+      const float degrees = 90.0f * (t <= 1.0f ? t : 2.0f - t);
+      const std::vector<glm::vec3> v = m.skinned_positions(0, 0, m.node_transforms(0, t));
+      ASSERT_EQ(v.size(), m.meshes[0].positions.size());
+      for (size_t i = 0; i < v.size(); ++i) {
+        const glm::vec3 expected = bent_tube_vertex(m.meshes[0].positions[i], length, degrees);
+        // the elbow's rotation is a slerp between the keys, so the angle is linear in t
+        EXPECT_NEAR(glm::length(v[i] - expected), 0.0f, 1e-5f) << name << " t=" << t << " vertex " << i;
+      }
+    }
+    // the tip of the bent tube points along -x at the elbow's height
+    const std::vector<glm::vec3> bent = m.skinned_positions(0, 0, m.node_transforms(0, 1.0f));
+    float min_x = 0.0f;
+    for (const glm::vec3& p : bent) min_x = std::min(min_x, p.x);
+    EXPECT_NEAR(min_x, -0.5f * length, 1e-5f);
+  }
+  // a vertex naming a joint the skin does not have
+  GltfModel broken = make_bending_tube(length, 0.2f, glm::vec3(0.5f));
+  broken.skins[0].joints = {0};
+  broken.skins[0].inverse_bind = {glm::mat4(1.0f)};
+  write_gltf(broken, dir / "broken.gltf");
+  try {
+    load_gltf(dir / "broken.gltf");
+    ADD_FAILURE() << "accepted a vertex naming joint 1 of a one-joint skin";
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("broken.gltf"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("joint 1 of a skin with 1"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST(ArRuntime, TheThreeKindsOfObjectsStaticAnimatedAndSkinned) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_kinds";
+  std::filesystem::create_directories(dir);
+  write_gltf(make_bending_tube(1.2f, 0.2f, {0.2f, 0.4f, 0.9f}), dir / "tube.gltf");
+  write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
+  std::ofstream(dir / "scene.json") << R"({ "models": [
+      { "file": "tube.gltf", "animation": { "clip": "bend" } },
+      { "file": "box.gltf", "position": [3, 0, 0] },
+      { "file": "box.gltf", "position": [-3, 0, 0], "animation": { "clip": "spin" } } ] })";
+  const ArSceneFile file = load_ar_scene(dir / "scene.json");
+  ArRuntime rt(file);
+  EXPECT_EQ(rt.static_triangles(), 12u) << "the box without animation is in the kd-tree";
+  EXPECT_EQ(rt.instance_count(), 1u) << "the spinning box is an instance";
+  EXPECT_EQ(rt.skinned_meshes(), 1u) << "the tube deforms";
+  // a ray where the bent tube's upper half lies at t = 1 s, and only then
+  const core::Ray probe{{-0.45f, 0.6f, 5.0f}, {0.0f, 0.0f, -1.0f}};
+  rt.update(0.0);
+  EXPECT_FALSE(rt.scene().intersect(probe).valid());
+  rt.update(1.0);
+  const core::Hit h = rt.scene().intersect(probe);
+  ASSERT_TRUE(h.valid());
+  EXPECT_NEAR(h.t, 5.0f - 0.1f, 1e-4f);
+  EXPECT_EQ(rt.material(h).color, glm::vec3(0.2f, 0.4f, 0.9f));
+  // the static box
+  const core::Hit s = rt.scene().intersect(core::Ray{{3.0f, 0.1f, 5.0f}, {0.0f, 0.0f, -1.0f}});
+  ASSERT_TRUE(s.valid());
+  EXPECT_EQ(s.inst, core::kStaticObject);
+  EXPECT_EQ(rt.material(s).color, glm::vec3(0.9f, 0.3f, 0.1f));
   std::filesystem::remove_all(dir);
 }
 

@@ -63,8 +63,11 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path);
 
 namespace artrace::io {
 
-/// The virtual objects of an AR scene file in a two-level scene: one rigid-mesh instance per
-/// (placement, glTF node with a mesh); node animations drive the instances' transforms.
+/// The virtual objects of an AR scene file in a two-level scene, as the paper's three kinds:
+/// models without animation go into the static kd-tree (in world space, built once); meshes under
+/// animated nodes are rigid instances whose transforms the node animation drives (hierarchically
+/// transformed objects); skinned meshes are deformable meshes whose vertices are skinned and
+/// refit every update.
 class ArRuntime {
  public:
   explicit ArRuntime(const ArSceneFile& scene);
@@ -74,17 +77,33 @@ class ArRuntime {
   ar::VirtualMaterial material(const core::Hit& hit) const;
   std::vector<ar::VirtualLight> lights() const;
   float ambient() const { return file_.ambient; }
+  /// How many triangles went into each kind.
+  size_t static_triangles() const { return static_parts_.size(); }
+  size_t instance_count() const { return parts_.size(); }
+  size_t skinned_meshes() const { return skinned_.size(); }
 
  private:
   struct Part {
-    size_t placement;
-    int node;
-    int mesh;
+    size_t placement = 0;
+    int node = -1;
+    int mesh = -1;
     core::InstanceHandle instance;
   };
+  struct StaticTriangle {
+    uint32_t placement, mesh, triangle;
+  };
+  struct Skinned {
+    size_t placement;
+    int node, mesh, skin;
+    core::DeformableHandle handle;
+  };
+  ar::VirtualMaterial material_of(size_t placement, int mesh, uint32_t triangle) const;
+
   const ArSceneFile& file_;
-  core::TwoLevelScene scene_{core::TwoLevelScene::Config::kBvh};
+  core::TwoLevelScene scene_{core::TwoLevelScene::Config::kKdTreeBvh};
   std::vector<Part> parts_;  ///< indexed by instance slot
+  std::vector<StaticTriangle> static_parts_;  ///< indexed by static triangle
+  std::vector<Skinned> skinned_;  ///< indexed by deformable slot
 };
 
 }  // namespace artrace::io

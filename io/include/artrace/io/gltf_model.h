@@ -1,6 +1,6 @@
 // glTF 2.0 models (.gltf and .glb) through tinygltf: triangle meshes with their materials, the node
-// hierarchy, and node animation (translation, rotation, scale; LINEAR, STEP and CUBICSPLINE
-// samplers). Skinned meshes are not deformed yet (their bind pose is used; see the closing notes).
+// hierarchy, node animation (translation, rotation, scale; LINEAR, STEP and CUBICSPLINE samplers)
+// and skinning (JOINTS_0 / WEIGHTS_0, linear blend skinning with the skin's inverse bind matrices).
 #pragma once
 
 #include "artrace/core/geometry.h"
@@ -23,14 +23,28 @@ struct GltfMaterial {
 };
 
 struct GltfMesh {
-  std::vector<core::Triangle> tris;  ///< in the mesh's own space
+  std::vector<core::Triangle> tris;  ///< in the mesh's own space (bind pose for skinned meshes)
   std::vector<uint32_t> material;    ///< per triangle
+  // the same triangles, indexed (tris[i] = positions[indices[i]])
+  std::vector<glm::vec3> positions;
+  std::vector<glm::uvec3> indices;
+  // skinning, per vertex (empty when the mesh has no JOINTS_0 / WEIGHTS_0)
+  std::vector<glm::uvec4> joints;  ///< indices into the skin's joint list
+  std::vector<glm::vec4> weights;
+  bool skinned() const { return !joints.empty(); }
+};
+
+struct GltfSkin {
+  std::string name;
+  std::vector<int> joints;                ///< node indices
+  std::vector<glm::mat4> inverse_bind;    ///< one per joint (identity when the file gives none)
 };
 
 struct GltfNode {
   std::string name;
   int parent = -1;
   int mesh = -1;
+  int skin = -1;
   glm::vec3 translation{0.0f};
   glm::quat rotation{1.0f, 0.0f, 0.0f, 0.0f};
   glm::vec3 scale{1.0f};
@@ -57,11 +71,16 @@ struct GltfModel {
   std::vector<GltfMaterial> materials;  ///< index 0 is the default material
   std::vector<GltfMesh> meshes;
   std::vector<GltfNode> nodes;          ///< parents before children
+  std::vector<GltfSkin> skins;
   std::vector<GltfAnimation> animations;
 
   /// Object-space transform of every node at time t of animation `clip` (-1: rest pose); the
   /// clip loops.
   std::vector<glm::mat4> node_transforms(int clip, float t) const;
+  /// Model-space vertices of a skinned mesh for the given node transforms (from node_transforms):
+  /// v' = sum_i w_i (joint_i · inverse_bind_i) v, weights normalised. As the glTF specification
+  /// says, the transform of the node holding the mesh does not apply.
+  std::vector<glm::vec3> skinned_positions(int mesh, int skin, const std::vector<glm::mat4>& node_world) const;
   size_t triangle_count() const;
 };
 
@@ -81,5 +100,9 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path);
 /// and a glass sphere. `radius`/`size` in metres.
 GltfModel make_spinning_box(float size, const glm::vec3& color);
 GltfModel make_glass_sphere(float radius);
+/// A skinned square tube of `length` along +y on two joints (root at the origin, elbow half way up),
+/// weights blending over the middle third; animation "bend" turns the elbow about z to 90 degrees
+/// and back in 2 s.
+GltfModel make_bending_tube(float length, float width, const glm::vec3& color);
 
 }  // namespace artrace::io
