@@ -2,6 +2,9 @@
 #include "bench_util.h"
 #include "commands.h"
 
+#include "artrace/io/ar_scene.h"
+#include "artrace/io/gltf_model.h"
+
 #include "artrace/io/aff_scene.h"
 #include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
@@ -62,6 +65,49 @@ nlohmann::json info_aff(const std::filesystem::path& path) {
     j["width"] = s.view->width;
     j["height"] = s.view->height;
   }
+  return j;
+}
+
+nlohmann::json info_gltf_model(const io::GltfModel& m) {
+  nlohmann::json j;
+  j["triangles"] = m.triangle_count();
+  j["meshes"] = m.meshes.size();
+  j["materials"] = m.materials.size() - 1;
+  j["nodes"] = m.nodes.size();
+  j["skins"] = m.skins.size();
+  nlohmann::json anims = nlohmann::json::array();
+  for (const io::GltfAnimation& a : m.animations) anims.push_back({{"name", a.name}, {"duration_s", a.duration_s}, {"channels", a.channels.size()}});
+  j["animations"] = anims;
+  return j;
+}
+
+nlohmann::json info_gltf(const std::filesystem::path& path) {
+  nlohmann::json j = info_gltf_model(io::load_gltf(path));
+  j["kind"] = "glTF model";
+  return j;
+}
+
+nlohmann::json info_ar_scene(const std::filesystem::path& path) {
+  const io::ArSceneFile f = io::load_ar_scene(path);
+  io::ArRuntime rt(f);
+  nlohmann::json j;
+  j["kind"] = "AR scene";
+  nlohmann::json models = nlohmann::json::array();
+  size_t triangles = 0;
+  for (size_t i = 0; i < f.models.size(); ++i) {
+    nlohmann::json m = info_gltf_model(f.loaded[i]);
+    m["file"] = f.models[i].file.string();
+    m["animated"] = f.models[i].clip >= 0;
+    triangles += f.loaded[i].triangle_count();
+    models.push_back(m);
+  }
+  j["models"] = models;
+  j["triangles"] = triangles;
+  j["static_triangles_in_kd_tree"] = rt.static_triangles();
+  j["animated_instances"] = rt.instance_count();
+  j["skinned_meshes"] = rt.skinned_meshes();
+  j["lights"] = f.lights.size();
+  j["ambient"] = f.ambient;
   return j;
 }
 
@@ -150,12 +196,16 @@ void add_recording_commands(CLI::App& app) {
   {
     auto path = std::make_shared<std::string>();
     auto json = std::make_shared<std::string>();
-    CLI::App* cmd = app.add_subcommand("info", "What a recording, AFF scene or ONI file holds, or why it cannot be read");
-    cmd->add_option("path", *path, "TUM folder, .oni file or .aff scene")->required();
+    CLI::App* cmd = app.add_subcommand("info", "What a recording, ONI file, AFF scene, glTF model or AR scene holds, or why it cannot be read");
+    cmd->add_option("path", *path, "TUM folder, image folder, .oni file, .aff scene, .gltf/.glb model or AR scene .json")->required();
     cmd->add_option("--json", *json, "also write the answer as JSON");
     cmd->callback([path, json] {
       const std::filesystem::path p(*path);
-      const nlohmann::json j = p.extension() == ".aff" ? info_aff(p) : info_recording(p);
+      const std::string ext = p.extension().string();
+      const nlohmann::json j = ext == ".aff"                      ? info_aff(p)
+                               : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
+                               : ext == ".json"                  ? info_ar_scene(p)
+                                                                 : info_recording(p);
       std::cout << *path << "\n";
       for (const auto& [key, value] : j.items()) std::cout << "  " << key << ": " << value.dump() << "\n";
       write_json(*json, j);

@@ -112,8 +112,9 @@ bool segment_meets(const glm::vec3& o, const glm::vec3& d, const core::Aabb& b) 
 /// factor (ambient + unblocked light) / (ambient + all light), 1 where nothing changes.
 /// A light that reaches a real point only through virtual objects but is blocked by the real
 /// scene too (a floor under a real table) was not reaching it in the recording either: it changes
-/// nothing. The depth mesh tells, from a few centimetres off the point (the mesh is coarser than
-/// the depth map, so it is not asked about the point's own surface).
+/// nothing. The depth mesh tells, from kRealSkip off the point: the mesh is coarser than the depth
+/// map and as noisy as the sensor, so it is not asked about the point's own surface.
+constexpr float kRealSkip = 0.1f;
 std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core::TwoLevelScene& scene,
                                            const DepthProxy* proxy, const std::vector<VirtualLight>& lights,
                                            const CompositeOptions& opt, CompositeStats& st) {
@@ -170,9 +171,9 @@ std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core:
             const glm::vec3 o = core::offset_ray_origin(p, side);
             blocked = scene.occluded(core::Ray{o, l.position - o, 0.0f, 1.0f});
           }
-          if (blocked && proxy && !proxy->empty() && dist > 0.05f) {
+          if (blocked && proxy && !proxy->empty() && dist > kRealSkip) {
             const glm::vec3 l_dir = to / dist;
-            if (proxy->scene().occluded(core::Ray{p + 0.04f * l_dir, l_dir, 0.0f, dist - 0.04f})) {
+            if (proxy->scene().occluded(core::Ray{p + kRealSkip * l_dir, l_dir, 0.0f, dist - kRealSkip})) {
               all -= l.color * cosine;  // the real scene already shadows this point from this light
               continue;
             }
@@ -194,7 +195,28 @@ std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core:
   });
   st.shadow_rays_real = rays;
   st.shadowed_real_pixels = darkened;
-  return factor;
+  if (darkened == 0) return factor;
+  // the sensor's noise makes neighbouring normals (and so the factors) jitter: average each factor
+  // with its four neighbours on the same surface (depth within 3%), which keeps the shadow's edge
+  std::vector<glm::vec3> smooth = factor;
+  for (int y = 1; y + 1 < h; ++y) {
+    for (int x = 1; x + 1 < w; ++x) {
+      const size_t i = static_cast<size_t>(y) * w + x;
+      const float z = d.at(x, y);
+      if (z <= 0.0f || factor[i] == glm::vec3(1.0f)) continue;
+      glm::vec3 sum = factor[i];
+      int n = 1;
+      for (const size_t j : {i - 1, i + 1, i - static_cast<size_t>(w), i + static_cast<size_t>(w)}) {
+        const float zj = d.depth_m[j];
+        if (zj > 0.0f && std::fabs(zj - z) < 0.03f * z && factor[j] != glm::vec3(1.0f)) {
+          sum += factor[j];
+          ++n;
+        }
+      }
+      smooth[i] = sum / static_cast<float>(n);
+    }
+  }
+  return smooth;
 }
 
 }  // namespace
