@@ -14,6 +14,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <atomic>
+#include <future>
 #include <csignal>
 #include <cstdio>
 #include <memory>
@@ -66,18 +67,43 @@ void run(const Options& opt) {
   auto previous = std::signal(SIGINT, on_sigint);
   const int64_t total = last - opt.first + 1;
   const auto start = std::chrono::steady_clock::now();
-  std::vector<double> frame_ms;
+  std::vector<double> real_rays;
+  std::vector<double> frame_ms, read_ms, update_ms, proxy_ms, trace_ms, shadow_ms, occlusion_ms, blend_ms, write_ms;
+  ar::DepthProxy proxy;
+  copt.proxy = &proxy;
   try {
-    ar::SensorFrame f;
+    // the next frame is read (decoded) on another thread while this one is composited
+    auto read_next = [&source, &read_ms](ar::SensorFrame& into) {
+      const auto tr = std::chrono::steady_clock::now();
+      const bool ok = source->next(into);
+      read_ms.push_back(ms_since(tr));
+      return ok;
+    };
+    ar::SensorFrame f, ahead;
+    std::future<bool> pending = std::async(std::launch::async, read_next, std::ref(ahead));
     for (int64_t k = 0; k < total; ++k) {
-      if (g_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
-      if (!source->next(f)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
+      if (g_interrupted) {
+        pending.wait();
+        throw std::runtime_error("interrupted: " + out.string() + " was not written");
+      }
+      if (!pending.get()) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
+      std::swap(f, ahead);
+      if (k + 1 < total) pending = std::async(std::launch::async, read_next, std::ref(ahead));
       const auto t0 = std::chrono::steady_clock::now();
-      runtime.update(f.color_time_s);
-      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const core::Hit& h) { return runtime.material(h); }, copt);
+      update_ms.push_back(runtime.update(f.color_time_s));
+      copt.object_bounds = runtime.object_bounds();
+      ar::CompositeStats st;
+      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const core::Hit& h) { return runtime.material(h); }, copt, &st);
+      proxy_ms.push_back(st.proxy_ms);
+      trace_ms.push_back(st.trace_ms);
+      shadow_ms.push_back(st.real_shadow_ms);
+      real_rays.push_back(st.shadow_rays_real);
+      occlusion_ms.push_back(st.occlusion_ms);
+      blend_ms.push_back(st.composite_ms);
       cv::Mat img = to_bgr(c);
       if (opt.side_by_side) cv::hconcat(std::vector<cv::Mat>{img, to_bgr(f.color), depth_view(f.depth, c.width, c.height)}, img);
       frame_ms.push_back(ms_since(t0));
+      const auto tw = std::chrono::steady_clock::now();
       if (video) {
         if (!writer.isOpened()) {
           for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
@@ -94,6 +120,7 @@ void run(const Options& opt) {
         std::snprintf(name, sizeof(name), "frame_%06lld.png", static_cast<long long>(opt.first + k));
         if (!cv::imwrite((partial / name).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
       }
+      write_ms.push_back(ms_since(tw));
       if (!opt.quiet) {
         const double s = ms_since(start) / 1000.0, fps = (k + 1) / std::max(s, 1e-9);
         std::fprintf(stderr, "\rframe %lld/%lld  %.1f frames/s  %.0f s left   ", static_cast<long long>(k + 1),
@@ -114,6 +141,12 @@ void run(const Options& opt) {
   if (!opt.quiet) std::fprintf(stderr, "\n");
   std::printf("%s: %lld frames in %.2f s (%.1f frames/s, %.1f ms median per frame)\n", out.string().c_str(),
               static_cast<long long>(total), s, total / std::max(s, 1e-9), median(frame_ms));
+  if (!opt.quiet) {
+    std::printf("  medians: read %.1f, update %.1f, depth mesh %.1f, trace %.1f, shadows on real surfaces %.1f, occlusion %.1f, "
+                "blend %.1f, encode %.1f ms; %.0f shadow rays from real points\n",
+                median(read_ms), median(update_ms), median(proxy_ms), median(trace_ms), median(shadow_ms), median(occlusion_ms),
+                median(blend_ms), median(write_ms), median(real_rays));
+  }
 }
 
 }  // namespace

@@ -225,6 +225,8 @@ class Replay {
   void render() {
     const auto t0 = std::chrono::steady_clock::now();
     timing_.update = runtime_.update(frame_.color_time_s);
+    copt_.object_bounds = runtime_.object_bounds();
+    copt_.proxy = &proxy_;
     ar::CompositeStats st;
     const ar::ColorImage c =
         ar::composite(frame_, runtime_.scene(), [&](const core::Hit& h) { return runtime_.material(h); }, copt_, &st);
@@ -290,6 +292,7 @@ class Replay {
   io::ArRuntime runtime_;
   std::unique_ptr<ar::FrameSource> source_;
   ar::CompositeOptions copt_;
+  ar::DepthProxy proxy_;
   ar::SensorFrame frame_;
   int64_t count_ = 0, index_ = -1, furthest_ = 0;
   double first_time_ = 0, last_time_ = 0, next_time_ = 0;

@@ -94,11 +94,11 @@ struct Shader {
   }
 };
 
-/// Whether the segment from `o` along `d` (t in [0, 1]) meets the box.
-bool segment_meets(const glm::vec3& o, const glm::vec3& d, const core::Aabb& b) {
+/// Whether the segment from `o` along `d` (t in [0, 1]) meets the box; `inv_d` = 1 / d.
+bool segment_meets(const glm::vec3& o, const glm::vec3& inv_d, const core::Aabb& b) {
   float t0 = 0.0f, t1 = 1.0f;
   for (int a = 0; a < 3; ++a) {
-    const float inv = 1.0f / d[a];
+    const float inv = inv_d[a];
     float n = (b.lo[a] - o[a]) * inv, f = (b.hi[a] - o[a]) * inv;
     if (n > f) std::swap(n, f);
     t0 = std::max(t0, n);
@@ -110,20 +110,93 @@ bool segment_meets(const glm::vec3& o, const glm::vec3& d, const core::Aabb& b) 
 
 /// Differential rendering of the virtual objects' shadows on the real surfaces: per pixel the
 /// factor (ambient + unblocked light) / (ambient + all light), 1 where nothing changes.
+struct Rect {
+  int x0, y0, x1, y1;  ///< [x0, x1) x [y0, y1)
+  bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+
+/// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
+/// shadow volume (the box, and its corners pushed away from the light to infinity, which project
+/// to their vanishing points). The whole image when a volume reaches behind the camera.
+Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
+                 int w, int h) {
+  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+  const glm::mat3 to_cam = glm::transpose(cam.rotation);
+  auto add = [&](const glm::vec3& c, bool direction) {
+    if (c.z <= 1e-4f) return false;
+    const float u = cam.fx * c.x / c.z + cam.cx, v = cam.fy * c.y / c.z + cam.cy;
+    minx = std::min(minx, u);
+    maxx = std::max(maxx, u);
+    miny = std::min(miny, v);
+    maxy = std::max(maxy, v);
+    (void)direction;
+    return true;
+  };
+  for (const core::Aabb& b : boxes) {
+    if (b.empty()) continue;
+    for (const VirtualLight& l : lights) {
+      for (int c = 0; c < 8; ++c) {
+        const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
+        if (!add(to_cam * (p - cam.position), false)) return Rect{0, 0, w, h};
+        const glm::vec3 away = p - l.position;
+        if (glm::dot(away, away) == 0.0f) return Rect{0, 0, w, h};
+        if (!add(to_cam * away, true)) return Rect{0, 0, w, h};
+      }
+    }
+  }
+  if (!(minx <= maxx)) return Rect{0, 0, 0, 0};
+  return Rect{std::clamp(static_cast<int>(std::floor(minx)) - 2, 0, w), std::clamp(static_cast<int>(std::floor(miny)) - 2, 0, h),
+              std::clamp(static_cast<int>(std::ceil(maxx)) + 2, 0, w), std::clamp(static_cast<int>(std::ceil(maxy)) + 2, 0, h)};
+}
+
 /// A light that reaches a real point only through virtual objects but is blocked by the real
 /// scene too (a floor under a real table) was not reaching it in the recording either: it changes
 /// nothing. The depth mesh tells, from kRealSkip off the point: the mesh is coarser than the depth
 /// map and as noisy as the sensor, so it is not asked about the point's own surface.
 constexpr float kRealSkip = 0.1f;
-std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core::TwoLevelScene& scene,
+const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const core::TwoLevelScene& scene,
                                            const DepthProxy* proxy, const std::vector<VirtualLight>& lights,
-                                           const CompositeOptions& opt, CompositeStats& st) {
-  // small holes filled first, so a noisy depth map does not leave unshadowed specks
+                                           const core::Camera& cam, const CompositeOptions& opt, CompositeStats& st) {
+  const int w = frame.depth.width, h = frame.depth.height;
+  // per-thread scratch kept across frames: no fresh megabytes (and page faults) every frame
+  // (taken by reference here: inside the tile lambda a thread_local name would be the worker's own)
+  thread_local std::vector<glm::vec3> factor_scratch, smooth_scratch;
+  std::vector<glm::vec3>& factor = factor_scratch;
+  std::vector<glm::vec3>& smooth = smooth_scratch;
+  factor.assign(static_cast<size_t>(w) * h, glm::vec3(1.0f));
+  const std::vector<core::Aabb> boxes = opt.object_bounds.empty() ? std::vector<core::Aabb>{scene.bounds()} : opt.object_bounds;
+  const Rect rect = shadow_rect(cam, boxes, lights, w, h);
+  if (rect.empty()) return factor;
+  // small holes filled first, so a noisy depth map does not leave unshadowed specks (in the
+  // rectangle and a margin, where holes are judged)
   const OcclusionOptions& oo = opt.occlusion_options;
-  const DepthImage d = fill_depth_holes(frame.depth, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
-  const int w = d.width, h = d.height;
-  std::vector<glm::vec3> factor(static_cast<size_t>(w) * h, glm::vec3(1.0f));
-  const core::Aabb bounds = scene.bounds();
+  const int margin = oo.fill_radius * oo.fill_passes + 2;
+  const Rect crop{std::max(0, rect.x0 - margin), std::max(0, rect.y0 - margin), std::min(w, rect.x1 + margin),
+                  std::min(h, rect.y1 + margin)};
+  DepthImage cropped;
+  cropped.width = crop.x1 - crop.x0;
+  cropped.height = crop.y1 - crop.y0;
+  cropped.depth_m.resize(static_cast<size_t>(cropped.width) * cropped.height);
+  for (int y = crop.y0; y < crop.y1; ++y) {
+    std::copy_n(&frame.depth.depth_m[static_cast<size_t>(y) * w + crop.x0], cropped.width,
+                &cropped.depth_m[static_cast<size_t>(y - crop.y0) * cropped.width]);
+  }
+  const DepthImage filled = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
+  DepthImage d;
+  d.width = w;
+  d.height = h;
+  d.depth_m.assign(static_cast<size_t>(w) * h, 0.0f);
+  for (int y = crop.y0; y < crop.y1; ++y) {
+    std::copy_n(&filled.depth_m[static_cast<size_t>(y - crop.y0) * filled.width], filled.width,
+                &d.depth_m[static_cast<size_t>(y) * w + crop.x0]);
+  }
+  auto meets_virtual = [&](const glm::vec3& p, const glm::vec3& to) {
+    const glm::vec3 inv = 1.0f / to;
+    for (const core::Aabb& b : boxes) {
+      if (segment_meets(p, inv, b)) return true;
+    }
+    return false;
+  };
   const Eigen::Isometry3d pose = frame.world_from_camera.value_or(Eigen::Isometry3d::Identity());
   const PinholeIntrinsics& k = frame.color_intrinsics;
   const Eigen::Matrix3f rot = pose.rotation().cast<float>();
@@ -137,12 +210,17 @@ std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core:
     return true;
   };
   std::atomic<int> rays{0}, darkened{0};
-  core::for_each_tile(w, h, opt.threads, [&](const core::Tile& t) {
+  core::for_each_tile(rect.x1 - rect.x0, rect.y1 - rect.y0, opt.threads, [&](const core::Tile& tile) {
+    const core::Tile t{tile.x0 + rect.x0, tile.y0 + rect.y0, tile.x1 + rect.x0, tile.y1 + rect.y0};
     int local_rays = 0, local_dark = 0;
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) {
         glm::vec3 p;
         if (!point(x, y, p)) continue;
+        // most points' rays to the lights pass nowhere near the virtual objects: nothing changes
+        bool near_virtual = false;
+        for (const VirtualLight& l : lights) near_virtual = near_virtual || meets_virtual(p, l.position - p);
+        if (!near_virtual) continue;
         // normal of the depth map from neighbours 2 pixels away (less noise), facing the camera;
         // unknown at holes and image borders
         constexpr int r = 2;
@@ -165,7 +243,7 @@ std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core:
           if (cosine <= 0.0f) continue;
           all += l.color * cosine;
           bool blocked = false;
-          if (segment_meets(p, to, bounds)) {
+          if (meets_virtual(p, to)) {
             ++local_rays;
             const glm::vec3 side = glm::dot(n, n) > 0.0f ? n : to / dist;
             const glm::vec3 o = core::offset_ray_origin(p, side);
@@ -198,9 +276,9 @@ std::vector<glm::vec3> real_shadow_factors(const SensorFrame& frame, const core:
   if (darkened == 0) return factor;
   // the sensor's noise makes neighbouring normals (and so the factors) jitter: average each factor
   // with its four neighbours on the same surface (depth within 3%), which keeps the shadow's edge
-  std::vector<glm::vec3> smooth = factor;
-  for (int y = 1; y + 1 < h; ++y) {
-    for (int x = 1; x + 1 < w; ++x) {
+  smooth = factor;
+  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {
+    for (int x = std::max(1, rect.x0); x < std::min(w - 1, rect.x1); ++x) {
       const size_t i = static_cast<size_t>(y) * w + x;
       const float z = d.at(x, y);
       if (z <= 0.0f || factor[i] == glm::vec3(1.0f)) continue;
@@ -282,11 +360,12 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     y1 = std::clamp(static_cast<int>(std::ceil(maxy)) + 1, 0, h);
   }
   // the virtual objects' shadows on the real surfaces (they may fall outside the objects' rectangle)
-  std::vector<glm::vec3> shadow;
+  const std::vector<glm::vec3>* shadow_ptr = nullptr;
   if (opt.shadows && opt.real_shadows && have_depth) {
     const auto ts = std::chrono::steady_clock::now();
-    shadow = real_shadow_factors(frame, scene, proxy, lights, opt, st);
+    shadow_ptr = &real_shadow_factors(frame, scene, proxy, lights, cam, opt, st);
     st.real_shadow_ms = ms_since(ts);
+    const std::vector<glm::vec3>& shadow = *shadow_ptr;
     if (st.shadowed_real_pixels > 0) {
       for (size_t i = 0; i < shadow.size(); ++i) {
         if (shadow[i] == glm::vec3(1.0f)) continue;
@@ -330,7 +409,30 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   t0 = std::chrono::steady_clock::now();
   std::vector<float> alpha;
   if (opt.occlusion && frame.depth.width == w && frame.depth.height == h) {
-    alpha = occlusion_alpha(frame.depth, frame.color, zv, opt.occlusion_options);
+    // only around the traced rectangle: a margin wide enough for the hole filling and the
+    // colour-guided refinement to see what they would see on the whole image
+    const OcclusionOptions& oo = opt.occlusion_options;
+    const int m = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
+    const int cx0 = std::max(0, x0 - m), cy0 = std::max(0, y0 - m), cx1 = std::min(w, x1 + m), cy1 = std::min(h, y1 + m);
+    const int cw = cx1 - cx0, ch = cy1 - cy0;
+    DepthImage cd;
+    ColorImage cc;
+    cd.width = cc.width = cw;
+    cd.height = cc.height = ch;
+    cd.depth_m.resize(static_cast<size_t>(cw) * ch);
+    cc.rgb.resize(static_cast<size_t>(cw) * ch * 3);
+    std::vector<float> cz(static_cast<size_t>(cw) * ch);
+    for (int y = cy0; y < cy1; ++y) {
+      const size_t src = static_cast<size_t>(y) * w + cx0, dst = static_cast<size_t>(y - cy0) * cw;
+      std::copy_n(&frame.depth.depth_m[src], cw, &cd.depth_m[dst]);
+      std::copy_n(&frame.color.rgb[3 * src], 3 * cw, &cc.rgb[3 * dst]);
+      std::copy_n(&zv[src], cw, &cz[dst]);
+    }
+    const std::vector<float> ca = occlusion_alpha(cd, cc, cz, oo);
+    alpha.assign(zv.size(), 0.0f);
+    for (int y = cy0; y < cy1; ++y) {
+      std::copy_n(&ca[static_cast<size_t>(y - cy0) * cw], cw, &alpha[static_cast<size_t>(y) * w + cx0]);
+    }
   } else {
     alpha.resize(zv.size());
     for (size_t i = 0; i < zv.size(); ++i) alpha[i] = std::isfinite(zv[i]) ? 1.0f : 0.0f;
@@ -343,7 +445,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       const size_t i = static_cast<size_t>(y) * w + x;
       if (alpha[i] <= 0.0f) continue;
       for (int c = 0; c < 3; ++c) {
-        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow.empty() ? 1.0f : shadow[i][c]);
+        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow_ptr ? (*shadow_ptr)[i][c] : 1.0f);
         out.rgb[3 * i + c] = core::linear_to_srgb8(alpha[i] * colour[i][c] + (1.0f - alpha[i]) * real);
       }
     }

@@ -139,6 +139,7 @@ namespace artrace::io {
 
 ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
   std::vector<core::Triangle> fixed;
+  static_bounds_.resize(file.models.size());
   for (size_t p = 0; p < file.models.size(); ++p) {
     const GltfModel& model = file.loaded[p];
     const ArModelPlacement& place = file.models[p];
@@ -164,6 +165,7 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
           const core::Triangle& tri = gm.tris[t];
           fixed.push_back({glm::vec3(m * glm::vec4(tri.v0, 1.0f)), glm::vec3(m * glm::vec4(tri.v1, 1.0f)),
                            glm::vec3(m * glm::vec4(tri.v2, 1.0f))});
+          for (const glm::vec3& v : {fixed.back().v0, fixed.back().v1, fixed.back().v2}) static_bounds_[p].extend(v);
           static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t});
         }
       } else {
@@ -186,16 +188,24 @@ double ArRuntime::update(double time_s) {
     const ArModelPlacement& m = file_.models[p];
     nodes[p] = file_.loaded[p].node_transforms(m.clip, static_cast<float>(time_s * m.speed));
   }
+  bounds_ = static_bounds_;
   for (const Part& part : parts_) {
     if (part.mesh < 0) continue;
-    scene_.set_transform(part.instance, file_.models[part.placement].world_from_model() * nodes[part.placement][part.node]);
+    const glm::mat4 m = file_.models[part.placement].world_from_model() * nodes[part.placement][part.node];
+    scene_.set_transform(part.instance, m);
+    for (const core::Triangle& t : file_.loaded[part.placement].meshes[part.mesh].tris) {
+      for (const glm::vec3& v : {t.v0, t.v1, t.v2}) bounds_[part.placement].extend(glm::vec3(m * glm::vec4(v, 1.0f)));
+    }
   }
   for (const Skinned& s : skinned_) {
     if (s.mesh < 0) continue;
     const glm::mat4 world = file_.models[s.placement].world_from_model();
     const std::vector<glm::vec3> v = file_.loaded[s.placement].skinned_positions(s.mesh, s.skin, nodes[s.placement]);
     core::DeformableMesh& d = scene_.deformable(s.handle);
-    for (size_t i = 0; i < v.size(); ++i) d.positions()[i] = glm::vec3(world * glm::vec4(v[i], 1.0f));
+    for (size_t i = 0; i < v.size(); ++i) {
+      d.positions()[i] = glm::vec3(world * glm::vec4(v[i], 1.0f));
+      bounds_[s.placement].extend(d.positions()[i]);
+    }
     d.restructure();
   }
   scene_.commit();

@@ -40,6 +40,9 @@ struct CompositeOptions {
   bool real_shadows = true;   ///< with `shadows`: the virtual objects' shadows on real surfaces
   bool real_reflections = true;  ///< reflection/refraction rays meet the depth mesh
   DepthProxy* proxy = nullptr;   ///< kept across frames by the caller; null: a local one
+  /// World boxes of the virtual objects, one per object (tighter than the scene's bounds, so fewer
+  /// real points need a shadow ray); empty: the scene's bounds.
+  std::vector<core::Aabb> object_bounds;
   float ambient = 0.3f;
   std::vector<VirtualLight> lights;  ///< empty: one light estimated from the frame
   int threads = 0;

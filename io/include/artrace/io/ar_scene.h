@@ -81,6 +81,8 @@ class ArRuntime {
   size_t static_triangles() const { return static_parts_.size(); }
   size_t instance_count() const { return parts_.size(); }
   size_t skinned_meshes() const { return skinned_.size(); }
+  /// World box of every placed model at the last update (for ar::CompositeOptions::object_bounds).
+  const std::vector<core::Aabb>& object_bounds() const { return bounds_; }
 
  private:
   struct Part {
@@ -104,6 +106,8 @@ class ArRuntime {
   std::vector<Part> parts_;  ///< indexed by instance slot
   std::vector<StaticTriangle> static_parts_;  ///< indexed by static triangle
   std::vector<Skinned> skinned_;  ///< indexed by deformable slot
+  std::vector<core::Aabb> static_bounds_;  ///< per placement: its static triangles
+  std::vector<core::Aabb> bounds_;         ///< per placement, at the last update
 };
 
 }  // namespace artrace::io
