@@ -21,9 +21,9 @@
 namespace artrace::tools {
 namespace {
 
-struct Options {
-  std::string scene, json, config = "kdtree+bvh", mode = "all", frames_dir, secondary = "packets";
-  int frames = 800, width = 512, height = 400, threads = 0, every = 1;
+struct Options : AnimationOptions {
+  std::string json, mode = "all", frames_dir, secondary = "packets";
+  int every = 1;
   float min_weight = 0.0f;
   bool quiet = false;
 };
@@ -272,12 +272,7 @@ void run_report(const ReportOptions& ro) {
 void add_bench_bart_command(CLI::App& app) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("bench-bart", "Render a BART animation with Whitted shading and time every frame (Table 1)");
-  cmd->add_option("--scene", opt->scene, "BART .aff scene")->required()->check(CLI::ExistingFile);
-  cmd->add_option("--frames", opt->frames, "frames to render (spread over the animation)")->capture_default_str()->check(CLI::Range(1, 100000));
-  cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  cmd->add_option("--config", opt->config, "bvh or kdtree+bvh")->capture_default_str()->check(CLI::IsMember({"bvh", "kdtree+bvh"}));
+  add_animation_options(cmd, *opt);
   cmd->add_option("--mode", opt->mode, "diffuse, shadows, reflect or all")->capture_default_str()->check(CLI::IsMember({"diffuse", "shadows", "reflect", "all"}));
   cmd->add_option("--secondary", opt->secondary, "trace reflection/refraction rays regrouped into packets or as single rays")
       ->capture_default_str()

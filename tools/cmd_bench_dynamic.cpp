@@ -16,9 +16,9 @@
 namespace artrace::tools {
 namespace {
 
-struct Options {
-  std::string scene, json, config = "kdtree+bvh", frames_dir;
-  int frames = 800, width = 512, height = 400, threads = 0, rebuild_frames = 0;
+struct Options : AnimationOptions {
+  std::string json, frames_dir;
+  int rebuild_frames = 0;
 };
 
 void run(const Options& opt) {
@@ -126,12 +126,7 @@ void run(const Options& opt) {
 void add_bench_dynamic_command(CLI::App& app) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("bench-dynamic", "Play a BART animation through the update API and time it");
-  cmd->add_option("--scene", opt->scene, "BART .aff scene")->required()->check(CLI::ExistingFile);
-  cmd->add_option("--frames", opt->frames, "frames to render (spread over the animation)")->capture_default_str()->check(CLI::Range(1, 100000));
-  cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  cmd->add_option("--config", opt->config, "bvh or kdtree+bvh")->capture_default_str()->check(CLI::IsMember({"bvh", "kdtree+bvh"}));
+  add_animation_options(cmd, *opt);
   cmd->add_option("--rebuild-frames", opt->rebuild_frames, "frames for the rebuild-everything baseline (0 = all)")->capture_default_str();
   cmd->add_option("--write-frames", opt->frames_dir, "folder to write every rendered frame to as PNG");
   cmd->add_option("--json", opt->json, "write the results as JSON");

@@ -19,6 +19,22 @@ void add_export_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_bench_bart_command(CLI::App& app);
 
+/// Options of the commands that play a BART animation.
+struct AnimationOptions {
+  std::string scene, config = "kdtree+bvh";
+  int frames = 800, width = 512, height = 400, threads = 0;
+};
+
+/// --scene, --frames, --width, --height, --threads, --config.
+inline void add_animation_options(CLI::App* cmd, AnimationOptions& o) {
+  cmd->add_option("--scene", o.scene, "BART .aff scene")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--frames", o.frames, "frames to render (spread over the animation)")->capture_default_str()->check(CLI::Range(1, 100000));
+  cmd->add_option("--width", o.width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
+  cmd->add_option("--height", o.height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
+  cmd->add_option("--threads", o.threads, "worker threads (0 = all cores)")->capture_default_str();
+  cmd->add_option("--config", o.config, "bvh or kdtree+bvh")->capture_default_str()->check(CLI::IsMember({"bvh", "kdtree+bvh"}));
+}
+
 /// Writes an image as 8-bit PNG (sRGB-encoded) via a temporary file renamed into place, so an
 /// interrupted run never leaves a half-written file under the final name. Throws on failure.
 void write_png(const core::Image& img, const std::filesystem::path& path);

@@ -12,17 +12,47 @@ namespace artrace::core {
 
 glm::vec3 Texture::bilinear(glm::vec2 uv) const {
   if (width <= 0 || height <= 0) return glm::vec3(1.0f);
-  // texel centres at (i + 0.5) / width; v = 0 is the bottom row
-  const float x = uv.x * static_cast<float>(width) - 0.5f;
-  const float y = (1.0f - uv.y) * static_cast<float>(height) - 0.5f;
+  // repeat: the fractional part, then texel centres at (i + 0.5) / width; v = 0 is the bottom row
+  const float u = uv.x - std::floor(uv.x), v = uv.y - std::floor(uv.y);
+  const float x = u * static_cast<float>(width) - 0.5f;
+  const float y = (1.0f - v) * static_cast<float>(height) - 0.5f;
   const float fx = std::floor(x), fy = std::floor(y);
   const float ax = x - fx, ay = y - fy;
-  auto wrap = [](long i, int n) { return static_cast<int>(((i % n) + n) % n); };
-  const long ix = static_cast<long>(fx), iy = static_cast<long>(fy);
+  // fx in [-1, width - 1], fy in [-1, height]: neighbours wrap around without a division
+  auto wrap = [](int i, int n) { return i < 0 ? i + n : (i >= n ? i - n : i); };
+  const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
   const int x0 = wrap(ix, width), x1 = wrap(ix + 1, width);
   const int y0 = wrap(iy, height), y1 = wrap(iy + 1, height);
   auto at = [&](int xx, int yy) { return texels[static_cast<size_t>(yy) * width + xx]; };
   return (at(x0, y0) * (1.0f - ax) + at(x1, y0) * ax) * (1.0f - ay) + (at(x0, y1) * (1.0f - ax) + at(x1, y1) * ax) * ay;
+}
+
+glm::vec3 Texture::sample(glm::vec2 uv, float lod) const {
+  const int level = std::clamp(static_cast<int>(lod + 0.5f), 0, static_cast<int>(mips.size()));
+  return level == 0 ? bilinear(uv) : mips[static_cast<size_t>(level - 1)].bilinear(uv);
+}
+
+void Texture::build_mipmaps() {
+  mips.clear();
+  const Texture* from = this;
+  while (from->width > 1 || from->height > 1) {
+    Texture t;
+    t.width = std::max(1, from->width / 2);
+    t.height = std::max(1, from->height / 2);
+    t.texels.resize(static_cast<size_t>(t.width) * t.height);
+    for (int y = 0; y < t.height; ++y) {
+      for (int x = 0; x < t.width; ++x) {
+        glm::vec3 sum(0.0f);
+        for (int k = 0; k < 4; ++k) {
+          const int sx = std::min(2 * x + (k & 1), from->width - 1), sy = std::min(2 * y + (k >> 1), from->height - 1);
+          sum += from->texels[static_cast<size_t>(sy) * from->width + sx];
+        }
+        t.texels[static_cast<size_t>(y) * t.width + x] = 0.25f * sum;
+      }
+    }
+    mips.push_back(std::move(t));
+    from = &mips.back();
+  }
 }
 
 ShadingMode parse_shading_mode(const std::string& name) {
@@ -90,6 +120,7 @@ struct Pending {
   glm::vec3 weight;
   uint8_t lane;
   uint8_t depth;
+  float dist = 0.0f;  ///< path length from the eye to the ray's origin (for texture footprints)
 };
 
 /// A shaded hit of the current wave.
@@ -97,6 +128,7 @@ struct Point {
   glm::vec3 p, ng, ns, view;
   glm::vec3 diffuse, specular;
   float magnitude = 0.0f;  ///< largest coordinate of the hit triangle
+  float dist = 0.0f;       ///< path length from the eye
   const Material* m = nullptr;
   bool inside = false;
 };
@@ -105,16 +137,27 @@ inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std:
 
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
+/// What every tile needs, worked out once per image.
+struct Prepared {
+  std::vector<float> highlight_cos;  ///< per material: below this cosine the highlight is under 1e-4
+  bool transmissive = false;
+  std::vector<Aabb> boxes;  ///< around transmissive triangles
+  bool have_boxes = false;
+
+  explicit Prepared(const ShadingScene& s) {
+    for (const Material& m : s.materials) {
+      transmissive |= m.transmittance > 0.0f;
+      highlight_cos.push_back(m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f);
+    }
+    have_boxes = s.surfaces->transmissive_bounds(boxes);
+  }
+};
+
 class WaveTracer {
  public:
-  WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const std::vector<Aabb>* boxes)
-      : s_(s), o_(o), c_(c), boxes_(boxes) {
-    for (const Material& m : s.materials) {
-      transmissive_ |= m.transmittance > 0.0f;
-      // below this cosine the highlight is under 1e-4 of the specular colour: not worth a pow()
-      highlight_cos_.push_back(m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f);
-    }
-  }
+  /// `spread`: footprint of a pixel per unit of distance (0: textures at full resolution).
+  WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const Prepared& pre, float spread = 0.0f)
+      : s_(s), o_(o), c_(c), boxes_(pre.have_boxes ? &pre.boxes : nullptr), pre_(pre), spread_(spread) {}
 
   /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
   void run(std::vector<Pending>& gen, std::vector<Pending>& next, glm::vec3* color) {
@@ -172,7 +215,9 @@ class WaveTracer {
       SurfaceInfo info;
       s_.surfaces->shading(h, tri, info);
       q.ns = glm::dot(info.normal, info.normal) > 0.0f ? glm::normalize(info.normal) : q.ng;
-      q.view = -r.ray.dir;
+      const float dir_len = glm::length(r.ray.dir);  // camera rays are not unit length
+      q.view = -r.ray.dir / dir_len;
+      q.dist = r.dist + h.t * dir_len;
       if (glm::dot(q.ng, q.view) < 0.0f) {  // the back side: the ray leaves a solid
         q.ng = -q.ng;
         q.ns = -q.ns;
@@ -182,7 +227,7 @@ class WaveTracer {
       q.m = &material(h);
       const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
       const glm::vec3 tex = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size())
-                                ? s_.textures[texture].bilinear(info.uv)
+                                ? s_.textures[texture].sample(info.uv, lod(r, h.t, info, s_.textures[texture]))
                                 : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
@@ -205,7 +250,8 @@ class WaveTracer {
         const float ndl = glm::dot(q.ns, l);
         if (ndl <= 0.0f || glm::dot(q.ng, l) <= 0.0f) continue;
         glm::vec3 c = q.diffuse * ndl;
-        const float min_cos = highlight_cos_[static_cast<size_t>(q.m - s_.materials.data())];
+        const size_t mi = static_cast<size_t>(q.m - s_.materials.data());
+        const float min_cos = pre_.highlight_cos[mi];
         if (min_cos < 1.0f && max3(q.specular) > 0.0f) {
           const float rv = glm::dot(2.0f * ndl * q.ns - l, q.view);
           if (rv > min_cos) c += q.specular * std::pow(rv, q.m->shine);
@@ -232,7 +278,7 @@ class WaveTracer {
         for (int i = 0; i < n; ++i) {
           if (!((blocked >> i) & 1u)) continue;
           trans[i] = 0.0f;
-          if (transmissive_ && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
+          if (pre_.transmissive && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
         }
         if (walk) transmission(shadow, walk, trans);
         c_.shadow_ms += ms(s0, Clock::now());
@@ -256,17 +302,26 @@ class WaveTracer {
         kr += glm::vec3(kt * f);
         glm::vec3 dir;
         const glm::vec3 wt = r.weight * (kt * (1.0f - f));
-        if (f < 1.0f && max3(wt) > 0.0f && max3(wt) >= o_.min_weight && refract_direction(r.ray.dir, q.ns, eta, dir)) {
+        if (f < 1.0f && max3(wt) > 0.0f && max3(wt) >= o_.min_weight && refract_direction(-q.view, q.ns, eta, dir)) {
           push(next, q, -q.ng, dir, wt, r);
         }
       }
       const glm::vec3 wr = r.weight * kr;
       if (max3(wr) > 0.0f && max3(wr) >= o_.min_weight) {
-        glm::vec3 dir = glm::reflect(r.ray.dir, q.ns);
-        if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(r.ray.dir, q.ng);
+        glm::vec3 dir = glm::reflect(-q.view, q.ns);
+        if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(-q.view, q.ng);
         push(next, q, q.ng, dir, wr, r);
       }
     }
+  }
+
+  /// Mip level: log2 of the texels a pixel's footprint covers at the hit (the footprint grows
+  /// with the path length; reflections and refractions are treated as flat).
+  float lod(const Pending& r, float t, const SurfaceInfo& info, const Texture& tex) const {
+    if (spread_ <= 0.0f || info.uv_per_world <= 0.0f) return 0.0f;
+    const float footprint = spread_ * (r.dist + t * glm::length(r.ray.dir));
+    const float texels = footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height));
+    return texels > 1.0f ? std::log2(texels) : 0.0f;
   }
 
   static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
@@ -279,6 +334,7 @@ class WaveTracer {
     s.weight = weight;
     s.lane = from.lane;
     s.depth = static_cast<uint8_t>(from.depth + 1);
+    s.dist = q.dist;
     next.push_back(s);
   }
 
@@ -333,8 +389,8 @@ class WaveTracer {
   const WhittedOptions& o_;
   Counters& c_;
   const std::vector<Aabb>* boxes_;
-  std::vector<float> highlight_cos_;  ///< per material
-  bool transmissive_ = false;
+  const Prepared& pre_;
+  float spread_ = 0.0f;
 };
 
 void check(const ShadingScene& scene) {
@@ -347,13 +403,12 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
   check(scene);
   const auto start = Clock::now();
   Image img(cam.width, cam.height);
-  std::vector<Aabb> boxes;
-  const bool have_boxes = scene.surfaces->transmissive_bounds(boxes);
+  const Prepared pre(scene);
   tbb::enumerable_thread_specific<Counters> counters;
   for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
     const auto t0 = Clock::now();
     Counters& c = counters.local();
-    WaveTracer tracer(scene, opt, c, have_boxes ? &boxes : nullptr);
+    WaveTracer tracer(scene, opt, c, pre, 1.0f / cam.fy);
     std::vector<Pending> gen, next;
     gen.reserve(4 * kPacketSize);
     next.reserve(4 * kPacketSize);
@@ -395,9 +450,8 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
 glm::vec3 trace_whitted(const ShadingScene& scene, const Ray& ray, const WhittedOptions& opt) {
   check(scene);
   Counters c;
-  std::vector<Aabb> boxes;
-  const bool have_boxes = scene.surfaces->transmissive_bounds(boxes);
-  WaveTracer tracer(scene, opt, c, have_boxes ? &boxes : nullptr);
+  const Prepared pre(scene);
+  WaveTracer tracer(scene, opt, c, pre);
   std::vector<Pending> gen{Pending{ray, glm::vec3(1.0f), 0, 0}}, next;
   glm::vec3 color[kPacketSize] = {};
   tracer.run(gen, next, color);

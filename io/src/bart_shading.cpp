@@ -142,7 +142,7 @@ bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {
   return true;
 }
 
-void BartSurfaces::shading(const core::Hit& hit, const core::Triangle&, core::SurfaceInfo& info) const {
+void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, core::SurfaceInfo& info) const {
   const TriangleBatch* b = anim_.batch(hit);
   if (!b || hit.prim >= b->size()) return;
   const float w = 1.0f - hit.u - hit.v;
@@ -157,6 +157,12 @@ void BartSurfaces::shading(const core::Hit& hit, const core::Triangle&, core::Su
   const auto& uv = b->uvs[hit.prim];
   info.uv = w * uv[0] + hit.u * uv[1] + hit.v * uv[2];
   info.texture = b->texture[hit.prim];
+  if (info.texture >= 0) {
+    const glm::vec2 e1 = uv[1] - uv[0], e2 = uv[2] - uv[0];
+    const float uv_area = std::fabs(e1.x * e2.y - e1.y * e2.x);
+    const float world_area = glm::length(world.geometric_normal());
+    info.uv_per_world = world_area > 0.0f ? std::sqrt(uv_area / world_area) : 0.0f;
+  }
 }
 
 core::ShadingScene make_shading_scene(const BartAnimation& animation, const BartSurfaces& surfaces) {
@@ -175,7 +181,10 @@ core::ShadingScene make_shading_scene(const BartAnimation& animation, const Bart
     s.materials.push_back(c);
   }
   if (s.materials.empty()) s.materials.push_back(core::Material{});
-  for (const auto& t : aff.textures) s.textures.push_back(load_ppm(t));
+  for (const auto& t : aff.textures) {
+    s.textures.push_back(load_ppm(t));
+    s.textures.back().build_mipmaps();
+  }
   for (const AffLight& l : aff.lights) s.lights.push_back({l.position, l.color});
   s.ambient = aff.ambient;
   s.background = aff.background;

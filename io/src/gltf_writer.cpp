@@ -35,6 +35,19 @@ int add_accessor(tinygltf::Model& m, const void* data, size_t bytes, size_t coun
   return static_cast<int>(m.accessors.size() - 1);
 }
 
+/// A rotation channel about `axis` through the given angles, one key a second.
+GltfChannel rotation_keys(int node, const glm::vec3& axis, const std::vector<float>& degrees) {
+  GltfChannel c;
+  c.node = node;
+  c.path = GltfChannel::kRotation;
+  for (size_t k = 0; k < degrees.size(); ++k) {
+    c.times.push_back(static_cast<float>(k));
+    const glm::quat q = glm::angleAxis(glm::radians(degrees[k]), axis);
+    c.values.push_back(glm::vec4(q.x, q.y, q.z, q.w));
+  }
+  return c;
+}
+
 }  // namespace
 
 void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
@@ -184,15 +197,7 @@ GltfModel make_spinning_box(float size, const glm::vec3& color) {
   m.nodes.push_back(node);
   GltfAnimation spin;
   spin.name = "spin";
-  GltfChannel c;
-  c.node = 0;
-  c.path = GltfChannel::kRotation;
-  for (int k = 0; k <= 4; ++k) {
-    c.times.push_back(static_cast<float>(k));
-    const glm::quat q = glm::angleAxis(glm::radians(90.0f * k), glm::vec3(0, 1, 0));
-    c.values.push_back(glm::vec4(q.x, q.y, q.z, q.w));
-  }
-  spin.channels.push_back(c);
+  spin.channels.push_back(rotation_keys(0, glm::vec3(0, 1, 0), {0.0f, 90.0f, 180.0f, 270.0f, 360.0f}));
   spin.duration_s = 4.0f;
   m.animations.push_back(spin);
   return m;
@@ -281,15 +286,7 @@ GltfModel make_bending_tube(float length, float width, const glm::vec3& color) {
   m.skins.push_back(skin);
   GltfAnimation bend;
   bend.name = "bend";
-  GltfChannel c;
-  c.node = 1;
-  c.path = GltfChannel::kRotation;
-  for (int k = 0; k <= 2; ++k) {
-    c.times.push_back(static_cast<float>(k));
-    const glm::quat q = glm::angleAxis(glm::radians(k == 1 ? 90.0f : 0.0f), glm::vec3(0, 0, 1));
-    c.values.push_back(glm::vec4(q.x, q.y, q.z, q.w));
-  }
-  bend.channels.push_back(c);
+  bend.channels.push_back(rotation_keys(1, glm::vec3(0, 0, 1), {0.0f, 90.0f, 0.0f}));
   bend.duration_s = 2.0f;
   m.animations.push_back(bend);
   return m;

@@ -349,6 +349,43 @@ TEST(Whitted, SecondaryRayOffsetsHoldFromTinyToHugeCoordinates) {
   check_offsets(1e-3f, glm::vec3(10.0f, 5.0f, -3.0f));
 }
 
+TEST(Whitted, ImagePixelsEqualSingleRaysThroughThem) {
+  // camera rays are not unit length: shading must not care (Fresnel, highlights, refraction)
+  const TestScene s = room();
+  const Camera cam = Camera::look_at({0.5f, -4.0f, 2.5f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 60.0f, 40, 30);
+  WhittedOptions o;
+  o.mode = ShadingMode::kAll;
+  o.threads = 2;
+  const Image img = render_whitted(s.shading, cam, o);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      Ray r = cam.ray(x + 0.5f, y + 0.5f);
+      r.dir = glm::normalize(r.dir);
+      expect_near(img.at(x, y), trace_whitted(s.shading, r, o), 1e-4f, "pixel against single ray");
+    }
+  }
+}
+
+TEST(Whitted, MipmapsAverageTheTexture) {
+  Texture t;
+  t.width = 8;
+  t.height = 4;
+  for (int y = 0; y < 4; ++y) {
+    for (int x = 0; x < 8; ++x) t.texels.push_back(glm::vec3((x + y) % 2 ? 1.0f : 0.0f, 0.5f, 0.25f));
+  }
+  t.build_mipmaps();
+  ASSERT_EQ(t.mips.size(), 3u);  // 4x2, 2x1, 1x1
+  EXPECT_EQ(t.mips[0].width, 4);
+  EXPECT_EQ(t.mips[0].height, 2);
+  EXPECT_EQ(t.mips.back().width, 1);
+  for (const Texture& m : t.mips) {
+    for (const glm::vec3& c : m.texels) expect_near(c, glm::vec3(0.5f, 0.5f, 0.25f), 1e-6f, "a checkerboard averages to grey");
+  }
+  expect_near(t.sample({0.3f, 0.6f}, 10.0f), glm::vec3(0.5f, 0.5f, 0.25f), 1e-6f, "far away");
+  const glm::vec3 near = t.sample({2.5f / 8.0f, 0.5f / 4.0f}, 0.0f);  // texel (2, 3) of the rows top first: white
+  expect_near(near, glm::vec3(1.0f, 0.5f, 0.25f), 1e-6f, "close up");
+}
+
 TEST(Whitted, TexturesAreFilteredBilinearly) {
   Texture t;
   t.width = 2;

@@ -28,7 +28,13 @@ namespace artrace::core {
 struct Texture {
   int width = 0, height = 0;
   std::vector<glm::vec3> texels;
+  std::vector<Texture> mips;  ///< halved levels 1, 2, ... (build_mipmaps)
+
   glm::vec3 bilinear(glm::vec2 uv) const;
+  /// Bilinear in the mip level nearest to `lod` (0: this level).
+  glm::vec3 sample(glm::vec2 uv, float lod) const;
+  /// Box-filtered halvings down to 1x1, so distant texture is averaged instead of aliased.
+  void build_mipmaps();
 };
 
 struct Material {
@@ -58,6 +64,9 @@ struct SurfaceInfo {
   glm::vec3 normal{0.0f};  ///< world space, any length; zero: the geometric normal
   glm::vec2 uv{0.0f};
   int32_t texture = -1;    ///< overrides the material's texture when >= 0
+  /// Texture-coordinate length per world length on this triangle (sqrt of the uv area over the
+  /// world area); with the ray's footprint it picks the mip level. 0: always the full texture.
+  float uv_per_world = 0.0f;
 };
 
 /// What the renderer asks of the application about a hit: its material and, at the hit's
