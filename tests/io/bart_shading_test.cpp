@@ -1,0 +1,89 @@
+// BART shading inputs: PPM textures (and the errors for broken ones), the kitchen's materials,
+// lights and textures, and its Whitted render being the same for any thread count and either way
+// of tracing secondary rays.
+#include "artrace/core/srgb.h"
+#include "artrace/io/bart_shading.h"
+#include "artrace/io/parse_error.h"
+#include "../test_util.h"
+
+#include <fstream>
+
+namespace artrace::io {
+namespace {
+
+void write_bytes(const std::filesystem::path& p, const std::string& bytes) {
+  std::ofstream(p, std::ios::binary) << bytes;
+}
+
+TEST(Ppm, ReadsBinaryPpmWithCommentsAsLinearColour) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm";
+  std::filesystem::create_directories(dir);
+  write_bytes(dir / "ok.ppm", std::string("P6\n# a comment\n2 1\n255\n") + std::string("\x00\x80\xff\x10\x20\x30", 6));
+  const core::Texture t = load_ppm(dir / "ok.ppm");
+  ASSERT_EQ(t.width, 2);
+  ASSERT_EQ(t.height, 1);
+  EXPECT_EQ(t.texels[0], glm::vec3(core::srgb8_to_linear(0), core::srgb8_to_linear(0x80), core::srgb8_to_linear(0xff)));
+  EXPECT_EQ(t.texels[1], glm::vec3(core::srgb8_to_linear(0x10), core::srgb8_to_linear(0x20), core::srgb8_to_linear(0x30)));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Ppm, BrokenFilesAreRefusedWithTheFileNamed) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm_bad";
+  std::filesystem::create_directories(dir);
+  write_bytes(dir / "ascii.ppm", "P3\n1 1\n255\n0 0 0\n");
+  write_bytes(dir / "truncated.ppm", std::string("P6\n4 4\n255\n") + std::string(10, '\x01'));
+  write_bytes(dir / "zero_max.ppm", std::string("P6\n1 1\n0\n") + std::string(3, '\x01'));
+  write_bytes(dir / "words.ppm", "P6\nwide 1\n255\n");
+  write_bytes(dir / "empty.ppm", "");
+  const std::pair<const char*, const char*> cases[] = {{"ascii.ppm", "not a binary PPM"},
+                                                        {"truncated.ppm", "truncated pixel data"},
+                                                        {"zero_max.ppm", "maximum value"},
+                                                        {"words.ppm", "width"},
+                                                        {"empty.ppm", "truncated header"},
+                                                        {"missing.ppm", "cannot open"}};
+  for (const auto& [name, what] : cases) {
+    try {
+      load_ppm(dir / name);
+      ADD_FAILURE() << name << " was accepted";
+    } catch (const ParseError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find((dir / name).string()), std::string::npos) << msg;
+      EXPECT_NE(msg.find(what), std::string::npos) << msg;
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST(BartShading, KitchenRendersTheSameForAnyThreadCountAndSecondaryRayGrouping) {
+  ARTRACE_REQUIRE_SHARED("bart/kitchen/aff/kitchen.aff");
+  const AffScene aff = load_aff(shared_path);
+  BartAnimation anim(aff, core::TwoLevelScene::Config::kKdTreeBvh);
+  BartSurfaces surfaces(anim);
+  const core::ShadingScene scene = make_shading_scene(anim, surfaces);
+  EXPECT_EQ(scene.materials.size(), aff.materials.size());
+  EXPECT_EQ(scene.lights.size(), 6u);
+  ASSERT_EQ(scene.textures.size(), aff.textures.size());
+  for (const core::Texture& t : scene.textures) EXPECT_FALSE(t.mips.empty());
+  anim.set_time(10.0);
+  const core::Camera cam = aff.camera_at(10.0, 64, 48);
+  core::WhittedOptions o;
+  o.mode = core::ShadingMode::kAll;
+  o.threads = 1;
+  const core::Image one = core::render_whitted(scene, cam, o);
+  o.threads = 2;
+  const core::Image two = core::render_whitted(scene, cam, o);
+  o.secondary_packets = false;
+  const core::Image single = core::render_whitted(scene, cam, o);
+  EXPECT_EQ(one.pixels, two.pixels);
+  EXPECT_EQ(one.pixels, single.pixels);
+  int lit = 0;
+  for (const glm::vec3& p : one.pixels) {
+    ASSERT_TRUE(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z));
+    ASSERT_GE(std::min({p.x, p.y, p.z}), 0.0f);
+    lit += p.x + p.y + p.z > 0.05f;
+  }
+  EXPECT_GT(lit, static_cast<int>(one.pixels.size()) * 9 / 10) << "the kitchen is lit";
+}
+
+}  // namespace
+}  // namespace artrace::io
