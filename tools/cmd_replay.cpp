@@ -231,7 +231,7 @@ class Replay {
     const ar::ColorImage c =
         ar::composite(frame_, runtime_.scene(), [&](const core::Hit& h) { return runtime_.material(h); }, copt_, &st);
     timing_.trace = st.trace_ms;
-    timing_.composite = st.occlusion_ms + st.composite_ms;
+    timing_.composite = st.proxy_ms + st.real_shadow_ms + st.occlusion_ms + st.composite_ms;  // depth mesh, shadows on real surfaces, occlusion, blend
     cv::Mat img = to_bgr(c);
     if (view_mode_ == View::kDepth) {
       img = depth_view(frame_.depth, c.width, c.height);
