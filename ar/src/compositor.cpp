@@ -94,26 +94,22 @@ struct Shader {
   }
 };
 
-/// Whether the segment from `o` along `d` (t in [0, 1]) meets the box; `inv_d` = 1 / d.
-bool segment_meets(const glm::vec3& o, const glm::vec3& inv_d, const core::Aabb& b) {
-  float t0 = 0.0f, t1 = 1.0f;
-  for (int a = 0; a < 3; ++a) {
-    const float inv = inv_d[a];
-    float n = (b.lo[a] - o[a]) * inv, f = (b.hi[a] - o[a]) * inv;
-    if (n > f) std::swap(n, f);
-    t0 = std::max(t0, n);
-    t1 = std::min(t1, f);
-    if (t0 > t1) return false;
-  }
-  return true;
-}
-
-/// Differential rendering of the virtual objects' shadows on the real surfaces: per pixel the
-/// factor (ambient + unblocked light) / (ambient + all light), 1 where nothing changes.
 struct Rect {
   int x0, y0, x1, y1;  ///< [x0, x1) x [y0, y1)
   bool empty() const { return x0 >= x1 || y0 >= y1; }
 };
+
+/// The rows [r.y0, r.y1) x columns [r.x0, r.x1) of a row-major image with `channels` values a pixel.
+template <class T>
+std::vector<T> crop(const std::vector<T>& image, int width, const Rect& r, int channels = 1) {
+  const int cw = r.x1 - r.x0;
+  std::vector<T> out(static_cast<size_t>(cw) * (r.y1 - r.y0) * channels);
+  for (int y = r.y0; y < r.y1; ++y) {
+    std::copy_n(&image[(static_cast<size_t>(y) * width + r.x0) * channels], static_cast<size_t>(cw) * channels,
+                &out[static_cast<size_t>(y - r.y0) * cw * channels]);
+  }
+  return out;
+}
 
 /// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
 /// shadow volume (the box, and its corners pushed away from the light to infinity, which project
@@ -122,14 +118,14 @@ Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, 
                  int w, int h) {
   float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
   const glm::mat3 to_cam = glm::transpose(cam.rotation);
-  auto add = [&](const glm::vec3& c, bool direction) {
+  // a point, or a direction (its vanishing point), in camera space; false behind the camera
+  auto add = [&](const glm::vec3& c) {
     if (c.z <= 1e-4f) return false;
     const float u = cam.fx * c.x / c.z + cam.cx, v = cam.fy * c.y / c.z + cam.cy;
     minx = std::min(minx, u);
     maxx = std::max(maxx, u);
     miny = std::min(miny, v);
     maxy = std::max(maxy, v);
-    (void)direction;
     return true;
   };
   for (const core::Aabb& b : boxes) {
@@ -137,10 +133,10 @@ Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, 
     for (const VirtualLight& l : lights) {
       for (int c = 0; c < 8; ++c) {
         const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-        if (!add(to_cam * (p - cam.position), false)) return Rect{0, 0, w, h};
+        if (!add(to_cam * (p - cam.position))) return Rect{0, 0, w, h};
         const glm::vec3 away = p - l.position;
         if (glm::dot(away, away) == 0.0f) return Rect{0, 0, w, h};
-        if (!add(to_cam * away, true)) return Rect{0, 0, w, h};
+        if (!add(to_cam * away)) return Rect{0, 0, w, h};
       }
     }
   }
@@ -171,29 +167,19 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   // rectangle and a margin, where holes are judged)
   const OcclusionOptions& oo = opt.occlusion_options;
   const int margin = oo.fill_radius * oo.fill_passes + 2;
-  const Rect crop{std::max(0, rect.x0 - margin), std::max(0, rect.y0 - margin), std::min(w, rect.x1 + margin),
+  const Rect area{std::max(0, rect.x0 - margin), std::max(0, rect.y0 - margin), std::min(w, rect.x1 + margin),
                   std::min(h, rect.y1 + margin)};
   DepthImage cropped;
-  cropped.width = crop.x1 - crop.x0;
-  cropped.height = crop.y1 - crop.y0;
-  cropped.depth_m.resize(static_cast<size_t>(cropped.width) * cropped.height);
-  for (int y = crop.y0; y < crop.y1; ++y) {
-    std::copy_n(&frame.depth.depth_m[static_cast<size_t>(y) * w + crop.x0], cropped.width,
-                &cropped.depth_m[static_cast<size_t>(y - crop.y0) * cropped.width]);
-  }
+  cropped.width = area.x1 - area.x0;
+  cropped.height = area.y1 - area.y0;
+  cropped.depth_m = crop(frame.depth.depth_m, w, area);
   const DepthImage filled = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
-  DepthImage d;
-  d.width = w;
-  d.height = h;
-  d.depth_m.assign(static_cast<size_t>(w) * h, 0.0f);
-  for (int y = crop.y0; y < crop.y1; ++y) {
-    std::copy_n(&filled.depth_m[static_cast<size_t>(y - crop.y0) * filled.width], filled.width,
-                &d.depth_m[static_cast<size_t>(y) * w + crop.x0]);
-  }
+  // every pixel read below (the rectangle and 2 around it, inside the image) is in the crop
+  auto depth = [&](int x, int y) { return filled.at(x - area.x0, y - area.y0); };
   auto meets_virtual = [&](const glm::vec3& p, const glm::vec3& to) {
     const glm::vec3 inv = 1.0f / to;
     for (const core::Aabb& b : boxes) {
-      if (segment_meets(p, inv, b)) return true;
+      if (core::segment_meets_box(p, inv, 0.0f, 1.0f, b)) return true;
     }
     return false;
   };
@@ -202,7 +188,7 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   const Eigen::Matrix3f rot = pose.rotation().cast<float>();
   const Eigen::Vector3f tr = pose.translation().cast<float>();
   auto point = [&](int x, int y, glm::vec3& p) {
-    const float z = d.at(x, y);
+    const float z = depth(x, y);
     if (z <= 0.0f) return false;
     const Eigen::Vector3f c(static_cast<float>((x - k.cx) / k.fx) * z, static_cast<float>((y - k.cy) / k.fy) * z, z);
     const Eigen::Vector3f q = rot * c + tr;
@@ -280,12 +266,14 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {
     for (int x = std::max(1, rect.x0); x < std::min(w - 1, rect.x1); ++x) {
       const size_t i = static_cast<size_t>(y) * w + x;
-      const float z = d.at(x, y);
+      const float z = depth(x, y);
       if (z <= 0.0f || factor[i] == glm::vec3(1.0f)) continue;
       glm::vec3 sum = factor[i];
       int n = 1;
-      for (const size_t j : {i - 1, i + 1, i - static_cast<size_t>(w), i + static_cast<size_t>(w)}) {
-        const float zj = d.depth_m[j];
+      const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+      for (int k = 0; k < 4; ++k) {
+        const size_t j = static_cast<size_t>(ny[k]) * w + nx[k];
+        const float zj = depth(nx[k], ny[k]);
         if (zj > 0.0f && std::fabs(zj - z) < 0.03f * z && factor[j] != glm::vec3(1.0f)) {
           sum += factor[j];
           ++n;
@@ -414,20 +402,15 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     const OcclusionOptions& oo = opt.occlusion_options;
     const int m = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
     const int cx0 = std::max(0, x0 - m), cy0 = std::max(0, y0 - m), cx1 = std::min(w, x1 + m), cy1 = std::min(h, y1 + m);
-    const int cw = cx1 - cx0, ch = cy1 - cy0;
+    const Rect around{cx0, cy0, cx1, cy1};
+    const int cw = cx1 - cx0;
     DepthImage cd;
     ColorImage cc;
     cd.width = cc.width = cw;
-    cd.height = cc.height = ch;
-    cd.depth_m.resize(static_cast<size_t>(cw) * ch);
-    cc.rgb.resize(static_cast<size_t>(cw) * ch * 3);
-    std::vector<float> cz(static_cast<size_t>(cw) * ch);
-    for (int y = cy0; y < cy1; ++y) {
-      const size_t src = static_cast<size_t>(y) * w + cx0, dst = static_cast<size_t>(y - cy0) * cw;
-      std::copy_n(&frame.depth.depth_m[src], cw, &cd.depth_m[dst]);
-      std::copy_n(&frame.color.rgb[3 * src], 3 * cw, &cc.rgb[3 * dst]);
-      std::copy_n(&zv[src], cw, &cz[dst]);
-    }
+    cd.height = cc.height = cy1 - cy0;
+    cd.depth_m = crop(frame.depth.depth_m, w, around);
+    cc.rgb = crop(frame.color.rgb, w, around, 3);
+    const std::vector<float> cz = crop(zv, w, around);
     const std::vector<float> ca = occlusion_alpha(cd, cc, cz, oo);
     alpha.assign(zv.size(), 0.0f);
     for (int y = cy0; y < cy1; ++y) {

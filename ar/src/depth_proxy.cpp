@@ -23,6 +23,7 @@ double DepthProxy::update(const SensorFrame& frame) {
   mesh.positions.resize(static_cast<size_t>(gw) * gh);
   std::vector<float> z(mesh.positions.size(), 0.0f);
   const Eigen::Isometry3d pose = frame.world_from_camera.value_or(Eigen::Isometry3d::Identity());
+  camera_from_world_ = pose.inverse();
   const PinholeIntrinsics& k = frame.color_intrinsics;
   for (int gy = 0; gy < gh; ++gy) {
     for (int gx = 0; gx < gw; ++gx) {
@@ -97,8 +98,7 @@ bool DepthProxy::intersect(const core::Ray& ray, float& t, glm::vec3& colour) co
   t = h.t;
   // the recorded colour where the hit point projects into the colour frame
   const glm::vec3 p = ray.org + h.t * ray.dir;
-  const Eigen::Isometry3d pose = frame_->world_from_camera.value_or(Eigen::Isometry3d::Identity());
-  const Eigen::Vector3d c = pose.inverse() * Eigen::Vector3d(p.x, p.y, p.z);
+  const Eigen::Vector3d c = camera_from_world_ * Eigen::Vector3d(p.x, p.y, p.z);
   const ColorImage& img = frame_->color;
   if (c.z() <= 0.0) return false;
   const Eigen::Vector2d uv = frame_->color_intrinsics.project(c);

@@ -40,4 +40,15 @@ bool occluded_brute_force(const Ray& ray, const std::vector<Triangle>& tris) {
   return false;
 }
 
+Aabb transform_box(const Aabb& b, const glm::mat4& m) {
+  Aabb out;
+  if (b.empty()) return out;
+  for (int c = 0; c < 8; ++c) {
+    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
+    out.extend(glm::vec3(m * glm::vec4(p, 1.0f)));
+  }
+  const glm::vec3 pad = 1e-5f * (glm::abs(out.lo) + glm::abs(out.hi) + out.extent()) + glm::vec3(1e-30f);
+  return Aabb{out.lo - pad, out.hi + pad};
+}
+
 }  // namespace artrace::core

@@ -7,19 +7,6 @@
 namespace artrace::core {
 namespace {
 
-/// World bounds of an object box under an affine transform, widened by a relative margin so that
-/// rounding never makes the top level cull a ray that reaches the object.
-Aabb transform_box(const Aabb& b, const glm::mat4& m) {
-  Aabb out;
-  if (b.empty()) return out;
-  for (int c = 0; c < 8; ++c) {
-    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-    out.extend(glm::vec3(m * glm::vec4(p, 1.0f)));
-  }
-  const glm::vec3 pad = 1e-5f * (glm::abs(out.lo) + glm::abs(out.hi) + out.extent()) + glm::vec3(1e-30f);
-  return Aabb{out.lo - pad, out.hi + pad};
-}
-
 void set_rows(float out[12], const glm::mat4& m) {
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 4; ++c) out[4 * r + c] = m[c][r];
@@ -109,6 +96,7 @@ InstanceHandle TwoLevelScene::add_instance(MeshHandle mesh, const glm::mat4& wor
   inst.mesh = mesh.index;
   inst.alive = true;
   inst.world_from_object = world_from_object;
+  inst.normal_to_world = glm::transpose(glm::inverse(glm::mat3(world_from_object)));
   // reuse a removed slot (its generation moves on, so old handles to it stay invalid)
   for (uint32_t i = 0; i < instances_.size(); ++i) {
     if (!instances_[i].alive) {
@@ -132,7 +120,9 @@ TwoLevelScene::Instance& TwoLevelScene::checked(InstanceHandle h) {
 }
 
 void TwoLevelScene::set_transform(InstanceHandle h, const glm::mat4& world_from_object) {
-  checked(h).world_from_object = world_from_object;
+  Instance& inst = checked(h);
+  inst.world_from_object = world_from_object;
+  inst.normal_to_world = glm::transpose(glm::inverse(glm::mat3(world_from_object)));
   dirty_ = true;
 }
 
@@ -296,6 +286,11 @@ Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
 glm::mat4 TwoLevelScene::world_from_object(const Hit& hit) const {
   if (hit.inst == kStaticObject || (hit.inst & 0x80000000u)) return glm::mat4(1.0f);
   return instances_.at(hit.inst).world_from_object;
+}
+
+glm::mat3 TwoLevelScene::normal_to_world(const Hit& hit) const {
+  if (hit.inst == kStaticObject || (hit.inst & 0x80000000u)) return glm::mat3(1.0f);
+  return instances_.at(hit.inst).normal_to_world;
 }
 
 Aabb TwoLevelScene::bounds() const {

@@ -341,18 +341,9 @@ class WaveTracer {
   /// Whether a shadow ray's segment meets a box holding transmissive triangles.
   bool may_cross_transmissive(const Ray& r) const {
     if (!boxes_) return true;
+    const glm::vec3 inv = 1.0f / r.dir;
     for (const Aabb& b : *boxes_) {
-      float t0 = r.tmin, t1 = r.tmax;
-      bool hit = true;
-      for (int a = 0; a < 3 && hit; ++a) {
-        const float inv = 1.0f / r.dir[a];
-        float n = (b.lo[a] - r.org[a]) * inv, f = (b.hi[a] - r.org[a]) * inv;
-        if (n > f) std::swap(n, f);
-        t0 = std::max(t0, n);
-        t1 = std::min(t1, f);
-        hit = t0 <= t1;
-      }
-      if (hit) return true;
+      if (segment_meets_box(r.org, inv, r.tmin, r.tmax, b)) return true;
     }
     return false;
   }

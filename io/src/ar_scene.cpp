@@ -173,7 +173,9 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
         if (meshes[mesh].index == core::kInvalidId) meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
         const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
         if (parts_.size() <= h.index) parts_.resize(h.index + 1);
-        parts_[h.index] = Part{p, static_cast<int>(n), mesh, h};
+        core::Aabb box;
+        for (const glm::vec3& v : gm.positions) box.extend(v);
+        parts_[h.index] = Part{p, static_cast<int>(n), mesh, h, box};
       }
     }
   }
@@ -193,9 +195,7 @@ double ArRuntime::update(double time_s) {
     if (part.mesh < 0) continue;
     const glm::mat4 m = file_.models[part.placement].world_from_model() * nodes[part.placement][part.node];
     scene_.set_transform(part.instance, m);
-    for (const core::Triangle& t : file_.loaded[part.placement].meshes[part.mesh].tris) {
-      for (const glm::vec3& v : {t.v0, t.v1, t.v2}) bounds_[part.placement].extend(glm::vec3(m * glm::vec4(v, 1.0f)));
-    }
+    bounds_[part.placement].extend(core::transform_box(part.object_box, m));  // no pass over the triangles
   }
   for (const Skinned& s : skinned_) {
     if (s.mesh < 0) continue;

@@ -131,13 +131,7 @@ bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {
   for (const auto& [inst, box] : object_boxes_) {
     core::Hit h;
     h.inst = inst;
-    const glm::mat4 m = anim_.scene().world_from_object(h);
-    core::Aabb world;
-    for (int c = 0; c < 8; ++c) {
-      const glm::vec3 corner((c & 1) ? box.hi.x : box.lo.x, (c & 2) ? box.hi.y : box.lo.y, (c & 4) ? box.hi.z : box.lo.z);
-      world.extend(glm::vec3(m * glm::vec4(corner, 1.0f)));
-    }
-    boxes.push_back(world);
+    boxes.push_back(core::transform_box(box, anim_.scene().world_from_object(h)));
   }
   return true;
 }
@@ -148,12 +142,7 @@ void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, co
   const float w = 1.0f - hit.u - hit.v;
   const auto& n = b->normals[hit.prim];
   const glm::vec3 object_normal = w * n[0] + hit.u * n[1] + hit.v * n[2];
-  if (hit.inst == core::kStaticObject) {
-    info.normal = object_normal;
-  } else {
-    const glm::mat3 m(anim_.scene().world_from_object(hit));
-    info.normal = glm::transpose(glm::inverse(m)) * object_normal;
-  }
+  info.normal = hit.inst == core::kStaticObject ? object_normal : anim_.scene().normal_to_world(hit) * object_normal;
   const auto& uv = b->uvs[hit.prim];
   info.uv = w * uv[0] + hit.u * uv[1] + hit.v * uv[2];
   info.texture = b->texture[hit.prim];

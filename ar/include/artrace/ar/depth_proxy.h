@@ -35,7 +35,8 @@ class DepthProxy {
  private:
   int step_;
   float max_jump_;
-  const SensorFrame* frame_ = nullptr;
+  const SensorFrame* frame_ = nullptr;  ///< the frame of the last update (colour look-ups)
+  Eigen::Isometry3d camera_from_world_ = Eigen::Isometry3d::Identity();
   core::TwoLevelScene scene_{core::TwoLevelScene::Config::kBvh};
   core::DeformableHandle mesh_;
   bool has_mesh_ = false;

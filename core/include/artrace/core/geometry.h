@@ -3,6 +3,8 @@
 
 #include <glm/glm.hpp>
 
+#include <algorithm>
+
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -84,5 +86,22 @@ bool intersect_triangle(const Ray& ray, const Triangle& tri, uint32_t prim, Hit&
 /// Brute force over every triangle: the reference the acceleration structures are tested against.
 Hit intersect_brute_force(const Ray& ray, const std::vector<Triangle>& tris);
 bool occluded_brute_force(const Ray& ray, const std::vector<Triangle>& tris);
+
+/// Whether the part t in [t0, t1] of the line org + t dir meets the box; `inv_dir` = 1 / dir
+/// (computed once for many boxes).
+inline bool segment_meets_box(const glm::vec3& org, const glm::vec3& inv_dir, float t0, float t1, const Aabb& b) {
+  for (int a = 0; a < 3; ++a) {
+    float n = (b.lo[a] - org[a]) * inv_dir[a], f = (b.hi[a] - org[a]) * inv_dir[a];
+    if (n > f) std::swap(n, f);
+    t0 = std::max(t0, n);
+    t1 = std::min(t1, f);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+/// Bounds of a box under an affine transform (its eight moved corners), widened by a relative
+/// margin so that rounding never culls a ray that reaches what the box holds. Empty stays empty.
+Aabb transform_box(const Aabb& b, const glm::mat4& m);
 
 }  // namespace artrace::core

@@ -117,9 +117,10 @@ class TwoLevelScene {
 
   /// The triangle a hit names, in world space.
   Triangle world_triangle(const Hit& hit) const;
-  /// The transform of the object a hit names (identity for static and deformable geometry); its
-  /// inverse transpose takes object-space normals to world space.
+  /// The transform of the object a hit names (identity for static and deformable geometry).
   glm::mat4 world_from_object(const Hit& hit) const;
+  /// Its inverse transpose (3x3), kept with the transform: takes object-space normals to world space.
+  glm::mat3 normal_to_world(const Hit& hit) const;
   static uint32_t deformable_object_id(DeformableHandle h) { return 0x80000000u | h.index; }
 
   Config config() const { return config_; }
@@ -138,6 +139,7 @@ class TwoLevelScene {
     uint32_t generation = 0;
     bool alive = false;
     glm::mat4 world_from_object{1.0f};
+    glm::mat3 normal_to_world{1.0f};
   };
   struct RigidMesh {
     std::unique_ptr<Bvh> bvh;

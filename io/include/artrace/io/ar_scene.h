@@ -90,6 +90,7 @@ class ArRuntime {
     int node = -1;
     int mesh = -1;
     core::InstanceHandle instance;
+    core::Aabb object_box;  ///< of the mesh, in its own space
   };
   struct StaticTriangle {
     uint32_t placement, mesh, triangle;
