@@ -208,7 +208,9 @@ TEST(Whitted, TotalInternalReflection) {
     t.commit();
     const glm::vec3 dir{static_cast<float>(std::sin(theta)), 0.0f, static_cast<float>(std::cos(theta))};
     const double f = fresnel_reference(theta, ior, 1.0);  // 1 past the critical angle (41.8 degrees)
-    if (deg > 41.9) EXPECT_EQ(f, 1.0);
+    if (deg > 41.9) {
+      EXPECT_EQ(f, 1.0);
+    }
     expect_near(t.trace({0, 0, -0.5f}, dir, ShadingMode::kReflect), colour * static_cast<float>(f), 1e-5f,
                 deg > 41.9 ? "total internal reflection" : "partial reflection");
   }
