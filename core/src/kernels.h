@@ -33,6 +33,13 @@ void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
 void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
+
+/// Transmittance of the lanes (see TwoLevelScene::transmittance); return the unsure lanes.
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
+LaneMask transmittance_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
+LaneMask two_level_transmittance_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask,
+                                               float* trans);
 }  // namespace sse
 
 namespace avx2 {
@@ -43,6 +50,8 @@ void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask ma
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
 }  // namespace avx2
 
 /// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
@@ -53,6 +62,8 @@ struct PacketKernels {
   LaneMask (*bvh_occluded)(const BvhView&, const RayPacket&, LaneMask);
   void (*two_level_intersect)(const TwoLevelView&, const RayPacket&, LaneMask, HitPacket&);
   LaneMask (*two_level_occluded)(const TwoLevelView&, const RayPacket&, LaneMask);
+  LaneMask (*transmittance)(const KdTreeView&, const RayPacket&, LaneMask, float*);
+  LaneMask (*two_level_transmittance)(const TwoLevelView&, const RayPacket&, LaneMask, float*);
 };
 const PacketKernels& packet_kernels();
 

@@ -39,4 +39,12 @@ LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& r
   return mask ? trace_two_level_packet<8, true>(scene, rays, 0, mask, nullptr) : 0u;
 }
 
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
+  return mask ? trace_lanes<8, true, true>(tree, rays, 0, mask, nullptr, trans) : 0u;
+}
+
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
+  return mask ? trace_two_level_packet<8, true, true>(scene, rays, 0, mask, nullptr, trans) : 0u;
+}
+
 }  // namespace artrace::core::avx2

@@ -63,7 +63,7 @@ bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t pri
   const float* const dir[3] = {&ray.dir.x, &ray.dir.y, &ray.dir.z};
   RayGroup<1> g;
   init_group<1>(g, org, dir, &ray.tmin, lane);
-  BestHits<1> best{hit.t, hit.u, hit.v, hit.prim, hit.inst, 0};
+  BestHits<1> best{hit.t, hit.u, hit.v, hit.prim, hit.inst, 0, 1.0f};
   if (!intersect_triangle<1, false>(g, tri, prim, -1, best)) return false;
   hit.t = best.t;
   hit.u = best.u;
@@ -161,6 +161,35 @@ void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacke
 
 LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
   return lane_by_lane_occluded(rays, mask, [&](const Ray& r) { return two_level_occluded_single(scene, r); });
+}
+
+// ---- transmittance
+
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
+  return in_halves(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true, true>(tree, rays, off, bits, nullptr, trans); });
+}
+
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
+  return in_halves(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<4, true, true>(scene, rays, off, bits, nullptr, trans);
+  });
+}
+
+LaneMask transmittance_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
+  LaneMask unsure = 0;
+  for (int i = 0; i < kPacketSize; ++i) {
+    if ((mask >> i) & 1u) unsure |= trace_lanes<1, true, true>(tree, rays, i, 1u, nullptr, trans) << i;
+  }
+  return unsure;
+}
+
+LaneMask two_level_transmittance_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask,
+                                               float* trans) {
+  LaneMask unsure = 0;
+  for (int i = 0; i < kPacketSize; ++i) {
+    if ((mask >> i) & 1u) unsure |= trace_two_level_packet<1, true, true>(scene, rays, i, 1u, nullptr, trans) << i;
+  }
+  return unsure;
 }
 
 }  // namespace artrace::core::sse

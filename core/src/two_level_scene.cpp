@@ -77,6 +77,43 @@ void TwoLevelScene::set_static(std::vector<Triangle> tris) {
   } else {
     static_bvh_ = std::make_unique<Bvh>(std::move(tris));
   }
+  static_pass_.clear();
+  dirty_ = true;
+}
+
+namespace {
+
+std::vector<float> checked_pass(std::vector<float> pass, size_t triangles, const char* what) {
+  if (pass.size() != triangles) {
+    throw std::invalid_argument(std::string(what) + ": " + std::to_string(pass.size()) + " values for " +
+                                std::to_string(triangles) + " triangles");
+  }
+  for (size_t i = 0; i < pass.size(); ++i) {
+    if (!(pass[i] >= 0.0f && pass[i] <= 1.0f)) {
+      throw std::invalid_argument(std::string(what) + ": triangle " + std::to_string(i) + " lets " +
+                                  std::to_string(pass[i]) + " of the light through (expected 0 to 1)");
+    }
+  }
+  return pass;
+}
+
+}  // namespace
+
+void TwoLevelScene::set_static_transmittance(std::vector<float> pass) {
+  const size_t n = config_ == Config::kKdTreeBvh ? kd_.triangles().size()
+                                                 : (static_bvh_ ? static_bvh_->triangles().size() : 0);
+  static_pass_ = checked_pass(std::move(pass), n, "set_static_transmittance");
+  has_transmittance_ = true;
+  dirty_ = true;
+}
+
+void TwoLevelScene::set_mesh_transmittance(MeshHandle mesh, std::vector<float> pass) {
+  if (mesh.index >= meshes_.size() || meshes_[mesh.index].generation != mesh.generation) {
+    throw std::invalid_argument("set_mesh_transmittance: invalid mesh handle " + std::to_string(mesh.index));
+  }
+  RigidMesh& m = meshes_[mesh.index];
+  m.pass = checked_pass(std::move(pass), m.bvh->triangles().size(), "set_mesh_transmittance");
+  has_transmittance_ = true;
   dirty_ = true;
 }
 
@@ -158,22 +195,24 @@ void TwoLevelScene::remove_deformable(DeformableHandle h) {
 void TwoLevelScene::commit() {
   data_.clear();
   const glm::mat4 identity(1.0f);
-  auto add = [&](const Bvh& bvh, const glm::mat4& world_from_object, uint32_t id) {
+  auto add = [&](const Bvh& bvh, const glm::mat4& world_from_object, uint32_t id, const std::vector<float>& pass) {
     if (bvh.triangles().empty()) return;
     InstanceData d;
     d.bvh = bvh.view();
+    d.bvh.pass = pass.empty() ? nullptr : pass.data();
     set_rows(d.object_from_world, glm::inverse(world_from_object));
     d.world_bounds = transform_box(bvh.bounds(), world_from_object);
     d.id = id;
     data_.push_back(d);
   };
-  if (static_bvh_) add(*static_bvh_, identity, kStaticObject);
+  const std::vector<float> opaque;
+  if (static_bvh_) add(*static_bvh_, identity, kStaticObject, static_pass_);
   for (uint32_t i = 0; i < instances_.size(); ++i) {
     const Instance& inst = instances_[i];
-    if (inst.alive) add(*meshes_[inst.mesh].bvh, inst.world_from_object, i);
+    if (inst.alive) add(*meshes_[inst.mesh].bvh, inst.world_from_object, i, meshes_[inst.mesh].pass);
   }
   for (uint32_t i = 0; i < deformables_.size(); ++i) {
-    if (deformables_[i].mesh) add(deformables_[i].mesh->bvh(), identity, deformable_object_id({i, 0}));
+    if (deformables_[i].mesh) add(deformables_[i].mesh->bvh(), identity, deformable_object_id({i, 0}), opaque);
   }
   order_.resize(data_.size());
   for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;
@@ -270,6 +309,32 @@ LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask) const {
   if (top_.empty() || rest == 0) return blocked;
   const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
   return blocked | packet_kernels().two_level_occluded(view, rays, rest);
+}
+
+LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, float* trans) const {
+  require_committed(dirty_);
+  mask &= kAllLanes;
+  for (int i = 0; i < kPacketSize; ++i) {
+    if ((mask >> i) & 1u) trans[i] = 1.0f;
+  }
+  LaneMask unsure = 0;
+  if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
+    KdTreeView kd = kd_.view();
+    kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
+    unsure = packet_kernels().transmittance(kd, rays, mask, trans);
+  }
+  LaneMask rest = 0;
+  for (int i = 0; i < kPacketSize; ++i) {
+    if (((mask >> i) & 1u) && trans[i] > 0.0f) rest |= 1u << i;
+  }
+  if (top_.empty() || rest == 0) return unsure;
+  const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
+  float objects[kPacketSize];
+  unsure |= packet_kernels().two_level_transmittance(view, rays, rest, objects);
+  for (int i = 0; i < kPacketSize; ++i) {
+    if ((rest >> i) & 1u) trans[i] *= objects[i];
+  }
+  return unsure;
 }
 
 Triangle TwoLevelScene::world_triangle(const Hit& hit) const {

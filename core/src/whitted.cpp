@@ -272,15 +272,25 @@ class WaveTracer {
       for (float& t : trans) t = 1.0f;
       if (has_shadows(o_.mode)) {
         const auto s0 = Clock::now();
-        const LaneMask blocked = s_.geometry->occluded(shadow, lit);
         c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
-        LaneMask walk = 0;
-        for (int i = 0; i < n; ++i) {
-          if (!((blocked >> i) & 1u)) continue;
-          trans[i] = 0.0f;
-          if (pre_.transmissive && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
+        if (pre_.transmissive && s_.geometry->has_transmittance()) {
+          // one traversal that sees through the marked glass and multiplies its transmittance;
+          // the rare unsure lanes are walked
+          const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans);
+          for (int i = 0; i < n; ++i) {
+            if ((unsure >> i) & 1u) trans[i] = 0.0f;
+          }
+          if (unsure) transmission(shadow, unsure, trans);
+        } else {
+          const LaneMask blocked = s_.geometry->occluded(shadow, lit);
+          LaneMask walk = 0;
+          for (int i = 0; i < n; ++i) {
+            if (!((blocked >> i) & 1u)) continue;
+            trans[i] = 0.0f;
+            if (pre_.transmissive && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
+          }
+          if (walk) transmission(shadow, walk, trans);
         }
-        if (walk) transmission(shadow, walk, trans);
         c_.shadow_ms += ms(s0, Clock::now());
       }
       for (int i = 0; i < n; ++i) {

@@ -1,9 +1,39 @@
 #include "artrace/io/bart_animation.h"
 
+#include <algorithm>
+
 namespace artrace::io {
+namespace {
+
+float transmittance(uint32_t material, const std::vector<AffMaterial>& materials) {
+  return material < materials.size() ? std::clamp(materials[material].transmittance, 0.0f, 1.0f) : 0.0f;
+}
+
+/// The light each triangle of `b` lets through; empty when every one is opaque.
+std::vector<float> transmittance(const TriangleBatch& b, const std::vector<AffMaterial>& materials) {
+  std::vector<float> pass(b.size(), 0.0f);
+  bool any = false;
+  for (size_t i = 0; i < b.size(); ++i) {
+    pass[i] = transmittance(b.material[i], materials);
+    any |= pass[i] > 0.0f;
+  }
+  if (!any) pass.clear();
+  return pass;
+}
+
+}  // namespace
 
 BartAnimation::BartAnimation(const AffScene& scene, core::TwoLevelScene::Config config) : aff_(scene), scene_(config) {
+  // The triangles' transmittance lets shadow rays see through glass in one traversal
+  // (TwoLevelScene::transmittance). Deforming triangles carry none, so when one of them is
+  // transmissive none is given and the renderer walks blocked shadow rays surface by surface.
+  bool give = true;
+  for (const AffAnimatedTriangle& t : scene.animated_triangles) give &= !(transmittance(t.material, scene.materials) > 0.0f);
   scene_.set_static(scene.nodes.empty() ? std::vector<core::Triangle>{} : scene.nodes[0].geometry.tris);
+  if (give && !scene.nodes.empty()) {
+    std::vector<float> pass = transmittance(scene.nodes[0].geometry, scene.materials);
+    if (!pass.empty()) scene_.set_static_transmittance(std::move(pass));
+  }
   node_of_.assign(scene.nodes.size(), -1);
   animation_of_.assign(scene.nodes.size(), nullptr);
   for (size_t n = 1; n < scene.nodes.size(); ++n) {
@@ -14,6 +44,10 @@ BartAnimation::BartAnimation(const AffScene& scene, core::TwoLevelScene::Config 
     if (it != scene.animations.end()) animation_of_[n] = &it->second;
     if (!node.geometry.tris.empty()) {
       const core::MeshHandle mesh = scene_.add_rigid_mesh(node.geometry.tris);
+      if (give) {
+        std::vector<float> pass = transmittance(node.geometry, scene.materials);
+        if (!pass.empty()) scene_.set_mesh_transmittance(mesh, std::move(pass));
+      }
       const core::InstanceHandle inst = scene_.add_instance(mesh, glm::mat4(1.0f));
       kinematics_.attach(node_of_[n], inst);
       if (instance_node_.size() <= inst.index) instance_node_.resize(inst.index + 1);

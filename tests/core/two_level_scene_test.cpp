@@ -5,6 +5,9 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include <algorithm>
+#include <utility>
+
 namespace artrace::core {
 namespace {
 
@@ -155,6 +158,99 @@ TEST(TwoLevelScene, PacketsEqualSingleRays) {
     }
   }
   set_simd_level(saved);
+}
+
+/// Transmittance of a segment by brute force: every triangle tested on its own; crossings at the
+/// same distance (an edge shared by two triangles of one pane) count once, as when walking.
+float transmittance_brute_force(const Ray& r, const std::vector<Triangle>& tris, const std::vector<float>& pass) {
+  std::vector<std::pair<float, float>> crossings;  // distance, transmittance
+  for (size_t k = 0; k < tris.size(); ++k) {
+    const Hit h = intersect_brute_force(r, {tris[k]});
+    if (!h.valid()) continue;
+    if (pass[k] == 0.0f) return 0.0f;
+    crossings.emplace_back(h.t, pass[k]);
+  }
+  std::sort(crossings.begin(), crossings.end());
+  float t = 1.0f;
+  for (size_t k = 0; k < crossings.size(); ++k) {
+    if (k == 0 || crossings[k].first != crossings[k - 1].first) t *= crossings[k].second;
+  }
+  return t;
+}
+
+TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnce) {
+  // A static soup, one rigid mesh instanced in place (identity, so that both sides test the same
+  // coordinates), and two large panes that cross many kd-tree leaves: a ray meeting a pane in two
+  // leaves must still count it once (0.5, not 0.25). Segments end inside the scene.
+  std::mt19937 rng(71);
+  std::vector<Triangle> ground = test::random_soup(rng, 1500, 0.4f);
+  ground.push_back({{-1, -1, 5.1f}, {11, -1, 5.1f}, {11, 11, 5.1f}});
+  ground.push_back({{-1, -1, 5.1f}, {11, 11, 5.1f}, {-1, 11, 5.1f}});
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  std::vector<float> ground_pass(ground.size());
+  for (float& v : ground_pass) v = uni(rng) < 0.3f ? 0.0f : 0.2f + 0.8f * uni(rng);
+  ground_pass[ground.size() - 2] = ground_pass[ground.size() - 1] = 0.5f;
+  const std::vector<Triangle> object = test::random_soup(rng, 300, 0.6f);
+  std::vector<float> object_pass(object.size());
+  for (float& v : object_pass) v = uni(rng) < 0.3f ? 0.0f : 0.2f + 0.8f * uni(rng);
+  std::vector<Triangle> flat = ground;
+  flat.insert(flat.end(), object.begin(), object.end());
+  std::vector<float> flat_pass = ground_pass;
+  flat_pass.insert(flat_pass.end(), object_pass.begin(), object_pass.end());
+
+  const SimdLevel saved = simd_level();
+  for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
+    TwoLevelScene scene(config);
+    scene.set_static(ground);
+    scene.set_static_transmittance(ground_pass);
+    const MeshHandle mesh = scene.add_rigid_mesh(object);
+    scene.set_mesh_transmittance(mesh, object_pass);
+    scene.add_instance(mesh, glm::mat4(1.0f));
+    scene.commit();
+    ASSERT_TRUE(scene.has_transmittance());
+    for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+      if (!simd_level_supported(level)) continue;
+      set_simd_level(level);
+      std::mt19937 r2(5);
+      size_t unsure_lanes = 0, partial = 0, counted = 0;
+      for (int p = 0; p < 400; ++p) {
+        RayPacket packet;
+        const glm::vec3 light = test::random_point(r2, 0.0f, 10.0f);
+        for (int i = 0; i < kPacketSize; ++i) {
+          const glm::vec3 o = test::random_point(r2, 0.0f, 10.0f);
+          packet.set(i, Ray{o, light - o, 0.0f, 1.0f});  // shadow-ray segments towards one point
+        }
+        float trans[kPacketSize];
+        const LaneMask unsure = scene.transmittance(packet, kAllLanes, trans);
+        const LaneMask blocked = scene.occluded(packet, kAllLanes);
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((unsure >> i) & 1u) {
+            ++unsure_lanes;
+            continue;
+          }
+          const float ref = transmittance_brute_force(packet.get(i), flat, flat_pass);
+          ASSERT_NEAR(trans[i], ref, 1e-5f * std::max(1.0f, ref)) << to_string(level) << " packet " << p << " lane " << i;
+          // nothing crossed: 1, exactly as the any-hit test says
+          if (!((blocked >> i) & 1u)) {
+            ASSERT_EQ(trans[i], 1.0f);
+          }
+          partial += ref > 0.0f && ref < 1.0f;
+          ++counted;
+        }
+      }
+      EXPECT_LE(unsure_lanes, counted / 100) << "unsure answers should be rare";
+      EXPECT_GT(partial, counted / 10) << "the test must exercise transmissive crossings";
+    }
+  }
+  set_simd_level(saved);
+
+  TwoLevelScene scene;
+  scene.set_static(ground);
+  EXPECT_THROW(scene.set_static_transmittance(std::vector<float>(3, 0.5f)), std::invalid_argument);
+  std::vector<float> bad = ground_pass;
+  bad[7] = 1.5f;
+  EXPECT_THROW(scene.set_static_transmittance(bad), std::invalid_argument);
+  EXPECT_THROW(scene.set_mesh_transmittance(MeshHandle{}, object_pass), std::invalid_argument);
 }
 
 TEST(TwoLevelScene, MisuseIsReported) {

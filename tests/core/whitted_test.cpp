@@ -41,8 +41,15 @@ struct TestScene : SurfaceAttributes {
       quad(a, d, c, b, m);
     }
   }
-  void commit() {
+  /// With `transmittance`, the scene also knows each triangle's transmittance, and shadow rays
+  /// see through glass in one traversal instead of walking it surface by surface.
+  void commit(bool transmittance = false) {
     geometry.set_static(tris);
+    if (transmittance) {
+      std::vector<float> pass;
+      for (const uint32_t m : mat) pass.push_back(shading.materials[m].transmittance);
+      geometry.set_static_transmittance(pass);
+    }
     geometry.commit();
     shading.geometry = &geometry;
     shading.surfaces = this;
@@ -131,18 +138,71 @@ TEST(Whitted, ShadowedPointGetsOnlyAmbient) {
 }
 
 TEST(Whitted, TransmissiveSurfacesAttenuateShadowsInsteadOfBlockingThem) {
-  TestScene s;
-  s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.5f, 0.5f, 0.5f})));
-  Material veil = diffuse({0.1f, 0.1f, 0.1f});
-  veil.transmittance = 0.6f;
-  veil.ior = 1.0f;
-  s.square_z(0, 0, 2, 10, s.add_material(veil), false);  // a semi-transparent sky under the light
-  s.square_z(0, 0, 2.5f, 10, s.add_material(veil), false);
-  s.shading.lights = {{{0.0f, 0.0f, 5.0f}, {1.0f, 1.0f, 1.0f}}};
-  s.commit();
-  // seen from below the veils: two layers pass 0.6 * 0.6 of the light
-  const glm::vec3 seen = s.trace({1.0f, 0.0f, 1.0f}, {-1.0f, 0.0f, -1.0f}, ShadingMode::kShadows);
-  expect_near(seen, glm::vec3(0.5f * 0.36f), 1e-5f, "attenuated");
+  for (const bool one_traversal : {false, true}) {
+    TestScene s;
+    s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.5f, 0.5f, 0.5f})));
+    Material veil = diffuse({0.1f, 0.1f, 0.1f});
+    veil.transmittance = 0.6f;
+    veil.ior = 1.0f;
+    s.square_z(0, 0, 2, 10, s.add_material(veil), false);  // a semi-transparent sky under the light
+    s.square_z(0, 0, 2.5f, 10, s.add_material(veil), false);
+    s.shading.lights = {{{0.0f, 0.0f, 5.0f}, {1.0f, 1.0f, 1.0f}}};
+    s.commit(one_traversal);
+    // seen from below the veils: two layers pass 0.6 * 0.6 of the light
+    const glm::vec3 seen = s.trace({1.0f, 0.0f, 1.0f}, {-1.0f, 0.0f, -1.0f}, ShadingMode::kShadows);
+    expect_near(seen, glm::vec3(0.5f * 0.36f), 1e-5f, one_traversal ? "attenuated (one traversal)" : "attenuated (walk)");
+  }
+}
+
+TEST(Whitted, ShadowsThroughGlassAreTheSameWalkedOrInOneTraversal) {
+  // Glass boxes and an opaque block over a floor, two lights: every pixel of the image must come
+  // out the same whether shadow rays walk the glass surface by surface or see through it.
+  auto build = [](TestScene& s) {
+    s.square_z(0, 0, 0, 10, s.add_material(diffuse({0.6f, 0.5f, 0.4f})));
+    Material tinted = glass(1.3f);
+    tinted.transmittance = 0.7f;
+    const uint32_t g = s.add_material(tinted);
+    const uint32_t block = s.add_material(diffuse({0.2f, 0.3f, 0.8f}));
+    auto box = [&](glm::vec3 lo, glm::vec3 hi, uint32_t m) {
+      const glm::vec3 p[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
+                              {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+      s.quad(p[0], p[3], p[2], p[1], m);
+      s.quad(p[4], p[5], p[6], p[7], m);
+      s.quad(p[0], p[1], p[5], p[4], m);
+      s.quad(p[2], p[3], p[7], p[6], m);
+      s.quad(p[1], p[2], p[6], p[5], m);
+      s.quad(p[0], p[4], p[7], p[3], m);
+    };
+    box({-2.0f, -1.0f, 0.5f}, {-0.5f, 1.0f, 2.0f}, g);
+    box({0.2f, -0.5f, 0.3f}, {1.6f, 0.9f, 1.1f}, g);
+    box({0.6f, -2.5f, 0.0f}, {1.2f, -1.5f, 1.5f}, block);
+    s.shading.lights = {{{1.0f, 2.0f, 6.0f}, {0.7f, 0.7f, 0.7f}}, {{-4.0f, -3.0f, 4.0f}, {0.5f, 0.4f, 0.3f}}};
+  };
+  TestScene walked, traversed;
+  build(walked);
+  build(traversed);
+  walked.commit(false);
+  traversed.commit(true);
+  Camera cam = Camera::look_at({5.0f, -6.0f, 6.0f}, {0.0f, 0.0f, 0.5f}, {0.0f, 0.0f, 1.0f}, 50.0f, 96, 72);
+  WhittedOptions o;
+  o.mode = ShadingMode::kAll;
+  const Image a = render_whitted(walked.shading, cam, o);
+  const Image b = render_whitted(traversed.shading, cam, o);
+  ASSERT_EQ(a.pixels.size(), b.pixels.size());
+  size_t tinted = 0;
+  for (size_t i = 0; i < a.pixels.size(); ++i) {
+    ASSERT_NEAR(a.pixels[i].x, b.pixels[i].x, 1e-5f) << "pixel " << i;
+    ASSERT_NEAR(a.pixels[i].y, b.pixels[i].y, 1e-5f) << "pixel " << i;
+    ASSERT_NEAR(a.pixels[i].z, b.pixels[i].z, 1e-5f) << "pixel " << i;
+  }
+  // the glass must matter: the same scene with opaque boxes differs
+  TestScene opaque;
+  build(opaque);
+  opaque.shading.materials[1].transmittance = 0.0f;
+  opaque.commit(true);
+  const Image c = render_whitted(opaque.shading, cam, o);
+  for (size_t i = 0; i < a.pixels.size(); ++i) tinted += glm::length(a.pixels[i] - c.pixels[i]) > 1e-3f;
+  EXPECT_GT(tinted, a.pixels.size() / 20);
 }
 
 TEST(Whitted, MirrorReflectsAKnownColour) {

@@ -47,6 +47,8 @@ struct BvhView {
   const std::atomic<uint8_t>* state;
   const Bvh* owner;
   void (*ensure_built)(const Bvh* owner, uint32_t node);
+  /// Transmittance queries: light passing each triangle (0 or null: opaque).
+  const float* pass = nullptr;
 };
 
 struct BvhStats {

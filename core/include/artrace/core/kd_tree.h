@@ -87,6 +87,8 @@ struct KdTreeView {
   const uint32_t* prim_refs;
   const Triangle* tris;
   Aabb bounds;
+  /// Transmittance queries: light passing each triangle (0 or null: opaque).
+  const float* pass = nullptr;
 };
 
 class KdTree {

@@ -115,6 +115,21 @@ class TwoLevelScene {
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
   LaneMask occluded(const RayPacket& rays, LaneMask mask) const;
 
+  /// Light passing each triangle, for shadow rays through glass: pass[i] in (0, 1] for a
+  /// transmissive triangle, 0 for an opaque one. For the static geometry (call after set_static,
+  /// which clears it) or a rigid mesh. Throws std::invalid_argument when the size differs from the
+  /// triangle count or a value is not in [0, 1]. Deformable meshes carry none (they are opaque to
+  /// transmittance queries).
+  void set_static_transmittance(std::vector<float> pass);
+  void set_mesh_transmittance(MeshHandle mesh, std::vector<float> pass);
+  /// Whether any transmittance was given; then every triangle without one counts as opaque.
+  bool has_transmittance() const { return has_transmittance_; }
+  /// In one traversal per level, for the lanes in `mask`: trans[i] = the product of the
+  /// transmittance of every transmissive triangle the segment (tmin, tmax] crosses, each once, or
+  /// 0 when it crosses an opaque one. Returns the lanes whose answer is unsure (a packet crossing
+  /// more than 16 distinct transmissive triangles of the static kd-tree; walk those instead).
+  LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans) const;
+
   /// The triangle a hit names, in world space.
   Triangle world_triangle(const Hit& hit) const;
   /// The transform of the object a hit names (identity for static and deformable geometry).
@@ -143,6 +158,7 @@ class TwoLevelScene {
   };
   struct RigidMesh {
     std::unique_ptr<Bvh> bvh;
+    std::vector<float> pass;
     uint32_t generation = 0;
   };
   struct Deformable {
@@ -158,6 +174,8 @@ class TwoLevelScene {
   Config config_;
   KdTree kd_;
   std::unique_ptr<Bvh> static_bvh_;
+  std::vector<float> static_pass_;
+  bool has_transmittance_ = false;
   std::vector<RigidMesh> meshes_;
   std::vector<Instance> instances_;
   std::vector<Deformable> deformables_;
