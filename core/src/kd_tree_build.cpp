@@ -3,11 +3,11 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_invoke.h>
-#include <tbb/parallel_sort.h>
 #include <tbb/task_group.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace artrace::core {
@@ -49,6 +49,36 @@ struct Subtree {
   std::vector<KdNode> nodes;
   std::vector<uint32_t> prims;
 };
+
+/// Float bits mapped to unsigned integers in the same order (finite values, no -0.0).
+inline uint32_t ordered_bits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, sizeof(u));
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+/// Sorts events made in triangle order by (position, type), triangles in order among equals:
+/// the order of operator<, by a stable least-significant-digit radix sort (type, then the
+/// position's bits 11 at a time) instead of a comparison sort. Positions must not be -0.0.
+void radix_sort(EventList& ev) {
+  EventList tmp(ev.size());
+  std::vector<uint32_t> count(2048);
+  auto pass = [&](const EventList& from, EventList& to, auto digit, uint32_t buckets) {
+    std::fill(count.begin(), count.begin() + buckets, 0u);
+    for (const Event& e : from) ++count[digit(e)];
+    uint32_t sum = 0;
+    for (uint32_t b = 0; b < buckets; ++b) {
+      const uint32_t c = count[b];
+      count[b] = sum;
+      sum += c;
+    }
+    for (const Event& e : from) to[count[digit(e)]++] = e;
+  };
+  pass(ev, tmp, [](const Event& e) { return e.type(); }, 3);
+  pass(tmp, ev, [](const Event& e) { return ordered_bits(e.pos) & 0x7ffu; }, 2048);
+  pass(ev, tmp, [](const Event& e) { return (ordered_bits(e.pos) >> 11) & 0x7ffu; }, 2048);
+  pass(tmp, ev, [](const Event& e) { return ordered_bits(e.pos) >> 22; }, 1024);
+}
 
 void add_events(EventList ev[3], const Aabb& box, uint32_t tri) {
   for (int a = 0; a < 3; ++a) {
@@ -126,6 +156,18 @@ class Builder {
 
   /// Builds the subtree of the node stored at `out.nodes[index]`. Consumes `ev`.
   void build(Subtree& out, uint32_t index, const Aabb& voxel, EventList ev[3], uint32_t n, int depth) {
+    if (n <= kSmall) {
+      // Small nodes (most of the tree's nodes): the same algorithm on arrays on the stack, with
+      // node-local triangle numbers, instead of a dozen heap vectors per node.
+      Item items[kSmall];
+      Event local[3][2 * kSmall];
+      size_t sizes[3];
+      to_local(ev, items, local, sizes);
+      for (int a = 0; a < 3; ++a) EventList().swap(ev[a]);
+      const Event* lists[3] = {local[0], local[1], local[2]};
+      build_small(out, index, voxel, items, n, lists, sizes, depth);
+      return;
+    }
     const Split split = n == 0 ? Split{} : find_split(voxel, ev, n);
     if (split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) ||
         depth >= max_depth_) {
@@ -164,6 +206,140 @@ class Builder {
   }
 
  private:
+  /// Nodes of at most this many triangles take build_small (its arrays live on the stack:
+  /// about 8 KB a level).
+  static constexpr uint32_t kSmall = 32;
+
+  /// A triangle of a small node with its bounds clipped to the node (what its events encode).
+  struct Item {
+    uint32_t tri;
+    glm::vec3 lo, hi;  // not an Aabb: arrays of these stay uninitialised until filled
+  };
+
+  /// A small node's events with node-local triangle numbers (items[i] is triangle i), in the
+  /// same (position, type) order; the items' boxes read off the events.
+  void to_local(const EventList ev[3], Item* items, Event local[3][2 * kSmall], size_t sizes[3]) {
+    std::vector<uint8_t>& slot = sides_.local();  // reused as triangle -> local number
+    uint32_t count = 0;
+    for (const Event& e : ev[0]) {
+      if (e.type() == kEnd) continue;
+      slot[e.tri()] = static_cast<uint8_t>(count);
+      items[count++].tri = e.tri();
+    }
+    for (int a = 0; a < 3; ++a) {
+      sizes[a] = ev[a].size();
+      for (size_t k = 0; k < ev[a].size(); ++k) {
+        const Event& e = ev[a][k];
+        const uint32_t i = slot[e.tri()];
+        Item& it = items[i];
+        if (e.type() != kEnd) it.lo[a] = e.pos;
+        if (e.type() != kStart) it.hi[a] = e.pos;
+        local[a][k] = Event(e.pos, i, e.type());
+      }
+    }
+    for (uint32_t i = 0; i < count; ++i) slot[items[i].tri] = kBoth;  // leave the array as found
+  }
+
+  /// Inserts events from a box (as add_events does) into fixed arrays.
+  static void add_local_events(Event out[3][2 * kSmall], size_t sizes[3], const Aabb& box, uint32_t i) {
+    for (int a = 0; a < 3; ++a) {
+      if (box.lo[a] == box.hi[a]) {
+        out[a][sizes[a]++] = Event(box.lo[a], i, kPlanar);
+      } else {
+        out[a][sizes[a]++] = Event(box.lo[a], i, kStart);
+        out[a][sizes[a]++] = Event(box.hi[a], i, kEnd);
+      }
+    }
+  }
+
+  /// build() for a node of at most kSmall triangles: the same sweep, the same classification,
+  /// clipping and merge as distribute(), on arrays on the stack.
+  void build_small(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n,
+                   const Event* const ev[3], const size_t sizes[3], int depth) {
+    const Split split = n == 0 ? Split{} : find_split(voxel, ev, sizes, n);
+    if (split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) || depth >= max_depth_) {
+      const uint32_t offset = static_cast<uint32_t>(out.prims.size());
+      for (uint32_t i = 0; i < n; ++i) out.prims.push_back(items[i].tri);
+      std::sort(out.prims.begin() + offset, out.prims.end());
+      out.nodes[index] = KdNode::make_leaf(offset, n);
+      return;
+    }
+    Aabb voxel_left = voxel, voxel_right = voxel;
+    voxel_left.hi[split.axis] = split.pos;
+    voxel_right.lo[split.axis] = split.pos;
+
+    // Classification (distribute's rules, read off the boxes); one-sided triangles keep their
+    // events under a new local number, straddlers get new events from clipping.
+    Item left[kSmall], right[kSmall];
+    uint8_t to_left[kSmall], to_right[kSmall];  // local number in the child, or kNone
+    constexpr uint8_t kNone = 0xff;
+    Event new_left[3][2 * kSmall], new_right[3][2 * kSmall];
+    size_t n_new_left[3] = {0, 0, 0}, n_new_right[3] = {0, 0, 0};
+    uint32_t n_left = 0, n_right = 0;
+    const int a = split.axis;
+    for (uint32_t i = 0; i < n; ++i) {
+      const Item& it = items[i];
+      to_left[i] = to_right[i] = kNone;
+      bool go_left, go_right;
+      if (it.lo[a] == it.hi[a]) {
+        go_left = it.lo[a] < split.pos || (it.lo[a] == split.pos && split.planar_left);
+        go_right = !go_left;
+      } else {
+        go_left = !(it.lo[a] >= split.pos);
+        go_right = !(it.hi[a] <= split.pos);
+      }
+      if (go_left && go_right) {  // straddling: clipped to each side
+        const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
+        const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
+        if (!bl.empty()) {
+          add_local_events(new_left, n_new_left, bl, n_left);
+          left[n_left++] = Item{it.tri, bl.lo, bl.hi};
+        }
+        if (!br.empty()) {
+          add_local_events(new_right, n_new_right, br, n_right);
+          right[n_right++] = Item{it.tri, br.lo, br.hi};
+        }
+      } else if (go_left) {
+        to_left[i] = static_cast<uint8_t>(n_left);
+        left[n_left++] = it;
+      } else {
+        to_right[i] = static_cast<uint8_t>(n_right);
+        right[n_right++] = it;
+      }
+    }
+    Event ev_left[3][2 * kSmall], ev_right[3][2 * kSmall];
+    size_t size_left[3], size_right[3];
+    for (int k = 0; k < 3; ++k) {
+      std::sort(new_left[k], new_left[k] + n_new_left[k]);
+      std::sort(new_right[k], new_right[k] + n_new_right[k]);
+      size_t sl = 0, sr = 0, il = 0, ir = 0;
+      for (size_t j = 0; j < sizes[k]; ++j) {
+        const Event& e = ev[k][j];
+        const uint32_t i = e.tri();
+        if (to_left[i] != kNone) {
+          const Event moved(e.pos, to_left[i], e.type());
+          while (il < n_new_left[k] && new_left[k][il] < moved) ev_left[k][sl++] = new_left[k][il++];
+          ev_left[k][sl++] = moved;
+        } else if (to_right[i] != kNone) {
+          const Event moved(e.pos, to_right[i], e.type());
+          while (ir < n_new_right[k] && new_right[k][ir] < moved) ev_right[k][sr++] = new_right[k][ir++];
+          ev_right[k][sr++] = moved;
+        }
+      }
+      while (il < n_new_left[k]) ev_left[k][sl++] = new_left[k][il++];
+      while (ir < n_new_right[k]) ev_right[k][sr++] = new_right[k][ir++];
+      size_left[k] = sl;
+      size_right[k] = sr;
+    }
+    const uint32_t child = static_cast<uint32_t>(out.nodes.size());
+    out.nodes.resize(child + 2);
+    out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+    const Event* lists_left[3] = {ev_left[0], ev_left[1], ev_left[2]};
+    const Event* lists_right[3] = {ev_right[0], ev_right[1], ev_right[2]};
+    build_small(out, child, voxel_left, left, n_left, lists_left, size_left, depth + 1);
+    build_small(out, child + 1, voxel_right, right, n_right, lists_right, size_right, depth + 1);
+  }
+
   float sah(float p_left, float p_right, uint32_t n_left, uint32_t n_right) const {
     const float lambda = (n_left == 0 || n_right == 0) ? opt_.empty_bonus : 1.0f;
     return lambda * (opt_.traversal_cost +
@@ -171,8 +347,14 @@ class Builder {
                                                p_right * static_cast<float>(n_right)));
   }
 
-  /// The sweep of Wald & Havran, section 4.2, over each axis' sorted events.
   Split find_split(const Aabb& voxel, const EventList ev[3], uint32_t n) const {
+    const Event* lists[3] = {ev[0].data(), ev[1].data(), ev[2].data()};
+    const size_t sizes[3] = {ev[0].size(), ev[1].size(), ev[2].size()};
+    return find_split(voxel, lists, sizes, n);
+  }
+
+  /// The sweep of Wald & Havran, section 4.2, over each axis' sorted events.
+  Split find_split(const Aabb& voxel, const Event* const lists[3], const size_t sizes[3], uint32_t n) const {
     Split best;
     const float area = voxel.surface_area();
     if (!(area > 0.0f)) return best;
@@ -184,14 +366,18 @@ class Builder {
       const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
       const float cap = ea * eb, ring = ea + eb;
       uint32_t n_left = 0, n_right = n;
-      const EventList& list = ev[k];
-      size_t i = 0;
-      while (i < list.size()) {
+      const Event* list = lists[k];
+      const size_t size = sizes[k];
+      // One pass, counting by type without branching on it (the types come in no predictable
+      // order); the cost is taken once all events at a position are counted.
+      uint32_t ending = 0, planar = 0, starting = 0;
+      for (size_t i = 0; i < size; ++i) {
+        const uint32_t type = list[i].type();
+        ending += type == kEnd;
+        planar += type == kPlanar;
+        starting += type == kStart;
         const float p = list[i].pos;
-        uint32_t ending = 0, planar = 0, starting = 0;
-        while (i < list.size() && list[i].pos == p && list[i].type() == kEnd) ++ending, ++i;
-        while (i < list.size() && list[i].pos == p && list[i].type() == kPlanar) ++planar, ++i;
-        while (i < list.size() && list[i].pos == p && list[i].type() == kStart) ++starting, ++i;
+        if (i + 1 < size && list[i + 1].pos == p) continue;
         n_right -= planar + ending;
         if (p > lo && p < hi) {
           const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
@@ -203,6 +389,7 @@ class Builder {
           if (cost < best.cost) best = Split{k, p, planar_left, cost};
         }
         n_left += starting + planar;
+        ending = planar = starting = 0;
       }
     }
     return best;
@@ -326,14 +513,14 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
   uint32_t n = 0;
   for (uint32_t i = 0; i < count; ++i) {
     if (!finite(tris_[i])) continue;
-    const Aabb box = Aabb::of(tris_[i]);
+    Aabb box = Aabb::of(tris_[i]);
+    box.lo += 0.0f;  // -0.0 becomes +0.0 (equal to it), as radix_sort needs
+    box.hi += 0.0f;
     bounds_.extend(box);
     add_events(ev, box, i);
     ++n;
   }
-  tbb::parallel_invoke([&] { tbb::parallel_sort(ev[0].begin(), ev[0].end()); },
-                       [&] { tbb::parallel_sort(ev[1].begin(), ev[1].end()); },
-                       [&] { tbb::parallel_sort(ev[2].begin(), ev[2].end()); });
+  tbb::parallel_invoke([&] { radix_sort(ev[0]); }, [&] { radix_sort(ev[1]); }, [&] { radix_sort(ev[2]); });
 
   int max_depth = opt.max_depth;
   if (max_depth <= 0) {
