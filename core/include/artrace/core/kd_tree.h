@@ -6,7 +6,9 @@
 // ("perfect splits"), an empty-space bonus, and leaves made where the SAH says splitting does not
 // pay. Departures: three per-axis event lists instead of one interleaved list (same O(N log N)); the
 // subtrees of large nodes are built in parallel with oneTBB into their own arrays and spliced in a
-// fixed order, so the node array is identical whatever the thread count.
+// fixed order, so the node array is identical whatever the thread count; nodes of at most 32
+// triangles (most of the tree) run the same steps on arrays on the stack with node-local triangle
+// numbers; the initial event lists are sorted by a stable radix sort (the same order).
 //
 // Traversal: the recursive ray segment algorithm (Havran's TA_B^rec), for single rays and for
 // SIMD packets (I. Wald, "Realtime Ray Tracing and Interactive Global Illumination", PhD thesis,
