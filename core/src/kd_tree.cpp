@@ -5,17 +5,16 @@
 #include <cmath>
 
 namespace artrace::core {
-namespace {
 
-/// The root box the kernels clip rays to, widened by a relative margin so that rounding in the
-/// slab test never loses a ray that grazes the scene's outer faces.
-Aabb padded(const Aabb& b) {
+Aabb padded_root_box(const Aabb& b) {
   if (b.empty()) return b;
   const float m = std::max({std::fabs(b.lo.x), std::fabs(b.lo.y), std::fabs(b.lo.z),
                             std::fabs(b.hi.x), std::fabs(b.hi.y), std::fabs(b.hi.z)});
   const float pad = m * 1e-6f + 1e-30f;
   return Aabb{b.lo - pad, b.hi + pad};
 }
+
+namespace {
 
 void walk(const KdTree& tree, uint32_t index, const Aabb& voxel, uint32_t depth, float inv_root_area,
           const KdTreeBuildOptions& opt, KdTreeStats& s) {
@@ -40,7 +39,7 @@ void walk(const KdTree& tree, uint32_t index, const Aabb& voxel, uint32_t depth,
 }  // namespace
 
 KdTreeView KdTree::view() const {
-  return {nodes_.data(), prim_refs_.data(), tris_.data(), padded(bounds_)};
+  return {nodes_.data(), prim_refs_.data(), tris_.data(), view_bounds_};
 }
 
 Hit KdTree::intersect(const Ray& ray) const {

@@ -1,5 +1,6 @@
 // SAH kd-tree construction in O(N log N) after Wald & Havran 2006 (see kd_tree.h).
 #include "artrace/core/kd_tree.h"
+#include "kernels.h"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_invoke.h>
@@ -80,15 +81,28 @@ void radix_sort(EventList& ev) {
   pass(tmp, ev, [](const Event& e) { return ordered_bits(e.pos) >> 22; }, 1024);
 }
 
-void add_events(EventList ev[3], const Aabb& box, uint32_t tri) {
+/// The events of a triangle's box on each axis: `emit(axis, event)`.
+template <class Emit>
+void box_events(const Aabb& box, uint32_t tri, const Emit& emit) {
   for (int a = 0; a < 3; ++a) {
     if (box.lo[a] == box.hi[a]) {
-      ev[a].emplace_back(box.lo[a], tri, kPlanar);
+      emit(a, Event(box.lo[a], tri, kPlanar));
     } else {
-      ev[a].emplace_back(box.lo[a], tri, kStart);
-      ev[a].emplace_back(box.hi[a], tri, kEnd);
+      emit(a, Event(box.lo[a], tri, kStart));
+      emit(a, Event(box.hi[a], tri, kEnd));
     }
   }
+}
+
+void add_events(EventList ev[3], const Aabb& box, uint32_t tri) {
+  box_events(box, tri, [&](int a, const Event& e) { ev[a].push_back(e); });
+}
+
+/// The voxels on either side of a split.
+void child_voxels(const Aabb& voxel, const Split& split, Aabb& left, Aabb& right) {
+  left = right = voxel;
+  left.hi[split.axis] = split.pos;
+  right.lo[split.axis] = split.pos;
 }
 
 /// Sutherland-Hodgman: keeps the part of polygon `in` (n vertices) on one side of a plane.
@@ -169,19 +183,16 @@ class Builder {
       return;
     }
     const Split split = n == 0 ? Split{} : find_split(voxel, ev, n);
-    if (split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) ||
-        depth >= max_depth_) {
+    if (is_leaf(split, n, depth)) {
       make_leaf(out, index, ev[0]);
       return;
     }
+    Aabb voxel_left, voxel_right;
+    child_voxels(voxel, split, voxel_left, voxel_right);
     EventList left[3], right[3];
     uint32_t n_left = 0, n_right = 0;
-    distribute(voxel, split, ev, left, right, n_left, n_right);
+    distribute(voxel_left, voxel_right, split, ev, left, right, n_left, n_right);
     for (int a = 0; a < 3; ++a) EventList().swap(ev[a]);
-
-    Aabb voxel_left = voxel, voxel_right = voxel;
-    voxel_left.hi[split.axis] = split.pos;
-    voxel_right.lo[split.axis] = split.pos;
 
     if (n >= opt_.parallel_threshold) {
       Subtree sub_left, sub_right;
@@ -240,16 +251,14 @@ class Builder {
     for (uint32_t i = 0; i < count; ++i) slot[items[i].tri] = kBoth;  // leave the array as found
   }
 
-  /// Inserts events from a box (as add_events does) into fixed arrays.
+  /// add_events into fixed arrays.
   static void add_local_events(Event out[3][2 * kSmall], size_t sizes[3], const Aabb& box, uint32_t i) {
-    for (int a = 0; a < 3; ++a) {
-      if (box.lo[a] == box.hi[a]) {
-        out[a][sizes[a]++] = Event(box.lo[a], i, kPlanar);
-      } else {
-        out[a][sizes[a]++] = Event(box.lo[a], i, kStart);
-        out[a][sizes[a]++] = Event(box.hi[a], i, kEnd);
-      }
-    }
+    box_events(box, i, [&](int a, const Event& e) { out[a][sizes[a]++] = e; });
+  }
+
+  /// The SAH termination: no split pays, or the depth cap is reached.
+  bool is_leaf(const Split& split, uint32_t n, int depth) const {
+    return split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) || depth >= max_depth_;
   }
 
   /// build() for a node of at most kSmall triangles: the same sweep, the same classification,
@@ -257,16 +266,15 @@ class Builder {
   void build_small(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n,
                    const Event* const ev[3], const size_t sizes[3], int depth) {
     const Split split = n == 0 ? Split{} : find_split(voxel, ev, sizes, n);
-    if (split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) || depth >= max_depth_) {
+    if (is_leaf(split, n, depth)) {
       const uint32_t offset = static_cast<uint32_t>(out.prims.size());
       for (uint32_t i = 0; i < n; ++i) out.prims.push_back(items[i].tri);
       std::sort(out.prims.begin() + offset, out.prims.end());
       out.nodes[index] = KdNode::make_leaf(offset, n);
       return;
     }
-    Aabb voxel_left = voxel, voxel_right = voxel;
-    voxel_left.hi[split.axis] = split.pos;
-    voxel_right.lo[split.axis] = split.pos;
+    Aabb voxel_left, voxel_right;
+    child_voxels(voxel, split, voxel_left, voxel_right);
 
     // Classification (distribute's rules, read off the boxes); one-sided triangles keep their
     // events under a new local number, straddlers get new events from clipping.
@@ -398,8 +406,8 @@ class Builder {
   /// Classifies triangles against the split and builds both children's sorted event lists:
   /// one-sided triangles keep their events, straddling ones are clipped to each child and their
   /// new events sorted and merged in (section 4.3).
-  void distribute(const Aabb& voxel, const Split& split, const EventList ev[3], EventList left[3],
-                  EventList right[3], uint32_t& n_left, uint32_t& n_right) {
+  void distribute(const Aabb& voxel_left, const Aabb& voxel_right, const Split& split, const EventList ev[3],
+                  EventList left[3], EventList right[3], uint32_t& n_left, uint32_t& n_right) {
     std::vector<uint8_t>& side = sides_.local();
     const EventList& list = ev[split.axis];
     for (const Event& e : list) {
@@ -424,9 +432,6 @@ class Builder {
         default: straddling.push_back(e.tri()); break;
       }
     }
-    Aabb voxel_left = voxel, voxel_right = voxel;
-    voxel_left.hi[split.axis] = split.pos;
-    voxel_right.lo[split.axis] = split.pos;
     EventList new_left[3], new_right[3];
     for (const uint32_t t : straddling) {
       const Aabb bl = clipped_bounds(tris_[t], voxel_left);
@@ -536,6 +541,7 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     Builder builder(tris_, opt, max_depth);
     builder.build(tree, 0, bounds_, ev, n, 0);
   }
+  view_bounds_ = padded_root_box(bounds_);
   nodes_ = std::move(tree.nodes);
   prim_refs_ = std::move(tree.prims);
 }

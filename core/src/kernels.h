@@ -7,6 +7,10 @@
 
 namespace artrace::core {
 
+/// The root box the kd-tree kernels clip rays to: the tree's bounds widened by a relative margin,
+/// so that rounding in the slab test never loses a ray that grazes the scene's outer faces.
+Aabb padded_root_box(const Aabb& b);
+
 namespace sse {
 /// Single rays (width 1, compiled for the baseline instruction set).
 Hit intersect_single(const KdTreeView& tree, const Ray& ray);

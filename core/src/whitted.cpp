@@ -141,7 +141,10 @@ inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z))
 struct Prepared {
   std::vector<float> highlight_cos;  ///< per material: below this cosine the highlight is under 1e-4
   bool transmissive = false;
-  std::vector<Aabb> boxes;  ///< around transmissive triangles
+  /// Shadow rays see through transmissive triangles in one traversal (the geometry knows their
+  /// transmittance); otherwise blocked ones are walked, and the boxes tell which need it.
+  bool one_traversal = false;
+  std::vector<Aabb> boxes;  ///< around transmissive triangles (for the walk)
   bool have_boxes = false;
 
   explicit Prepared(const ShadingScene& s) {
@@ -149,7 +152,8 @@ struct Prepared {
       transmissive |= m.transmittance > 0.0f;
       highlight_cos.push_back(m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f);
     }
-    have_boxes = s.surfaces->transmissive_bounds(boxes);
+    one_traversal = transmissive && s.geometry->has_transmittance();
+    if (transmissive && !one_traversal) have_boxes = s.surfaces->transmissive_bounds(boxes);
   }
 };
 
@@ -273,7 +277,7 @@ class WaveTracer {
       if (has_shadows(o_.mode)) {
         const auto s0 = Clock::now();
         c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
-        if (pre_.transmissive && s_.geometry->has_transmittance()) {
+        if (pre_.one_traversal) {
           // one traversal that sees through the marked glass and multiplies its transmittance;
           // the rare unsure lanes are walked
           const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans);

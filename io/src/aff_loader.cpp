@@ -4,6 +4,7 @@
 
 #include <glm/gtc/matrix_transform.hpp>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -609,6 +610,15 @@ size_t AffScene::triangle_count() const {
 }
 
 size_t AffScene::static_triangle_count() const { return nodes.empty() ? 0 : nodes[0].geometry.size(); }
+
+float AffScene::transmittance(uint32_t material) const {
+  return material < materials.size() ? std::clamp(materials[material].transmittance, 0.0f, 1.0f) : 0.0f;
+}
+
+bool AffScene::deforming_transmissive() const {
+  return std::any_of(animated_triangles.begin(), animated_triangles.end(),
+                     [&](const AffAnimatedTriangle& t) { return transmittance(t.material) > 0.0f; });
+}
 
 core::Camera AffScene::camera_at(double t, int width, int height) const {
   const float fov = view ? view->fov_y_deg : 45.0f;

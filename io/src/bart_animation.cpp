@@ -1,20 +1,14 @@
 #include "artrace/io/bart_animation.h"
 
-#include <algorithm>
-
 namespace artrace::io {
 namespace {
 
-float transmittance(uint32_t material, const std::vector<AffMaterial>& materials) {
-  return material < materials.size() ? std::clamp(materials[material].transmittance, 0.0f, 1.0f) : 0.0f;
-}
-
 /// The light each triangle of `b` lets through; empty when every one is opaque.
-std::vector<float> transmittance(const TriangleBatch& b, const std::vector<AffMaterial>& materials) {
+std::vector<float> transmittance(const TriangleBatch& b, const AffScene& scene) {
   std::vector<float> pass(b.size(), 0.0f);
   bool any = false;
   for (size_t i = 0; i < b.size(); ++i) {
-    pass[i] = transmittance(b.material[i], materials);
+    pass[i] = scene.transmittance(b.material[i]);
     any |= pass[i] > 0.0f;
   }
   if (!any) pass.clear();
@@ -27,11 +21,10 @@ BartAnimation::BartAnimation(const AffScene& scene, core::TwoLevelScene::Config 
   // The triangles' transmittance lets shadow rays see through glass in one traversal
   // (TwoLevelScene::transmittance). Deforming triangles carry none, so when one of them is
   // transmissive none is given and the renderer walks blocked shadow rays surface by surface.
-  bool give = true;
-  for (const AffAnimatedTriangle& t : scene.animated_triangles) give &= !(transmittance(t.material, scene.materials) > 0.0f);
+  const bool give = !scene.deforming_transmissive();
   scene_.set_static(scene.nodes.empty() ? std::vector<core::Triangle>{} : scene.nodes[0].geometry.tris);
   if (give && !scene.nodes.empty()) {
-    std::vector<float> pass = transmittance(scene.nodes[0].geometry, scene.materials);
+    std::vector<float> pass = transmittance(scene.nodes[0].geometry, scene);
     if (!pass.empty()) scene_.set_static_transmittance(std::move(pass));
   }
   node_of_.assign(scene.nodes.size(), -1);
@@ -45,7 +38,7 @@ BartAnimation::BartAnimation(const AffScene& scene, core::TwoLevelScene::Config 
     if (!node.geometry.tris.empty()) {
       const core::MeshHandle mesh = scene_.add_rigid_mesh(node.geometry.tris);
       if (give) {
-        std::vector<float> pass = transmittance(node.geometry, scene.materials);
+        std::vector<float> pass = transmittance(node.geometry, scene);
         if (!pass.empty()) scene_.set_mesh_transmittance(mesh, std::move(pass));
       }
       const core::InstanceHandle inst = scene_.add_instance(mesh, glm::mat4(1.0f));

@@ -82,13 +82,11 @@ core::Texture load_ppm(const std::filesystem::path& path) {
 namespace {
 
 /// Boxes around runs of consecutive transmissive triangles, merged pairwise down to `cap` boxes.
-std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const std::vector<AffMaterial>& materials, size_t cap) {
+std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const AffScene& scene, size_t cap) {
   std::vector<core::Aabb> boxes;
   bool open = false;
   for (size_t i = 0; i < b.size(); ++i) {
-    const uint32_t m = b.material[i];
-    const bool t = m < materials.size() && materials[m].transmittance > 0.0f;
-    if (!t) {
+    if (!(scene.transmittance(b.material[i]) > 0.0f)) {
       open = false;
       continue;
     }
@@ -112,17 +110,15 @@ std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const std::vec
 
 BartSurfaces::BartSurfaces(const BartAnimation& animation) : anim_(animation) {
   const AffScene& aff = animation.aff();
-  if (!aff.nodes.empty()) static_boxes_ = transmissive_runs(aff.nodes[0].geometry, aff.materials, 64);
+  if (!aff.nodes.empty()) static_boxes_ = transmissive_runs(aff.nodes[0].geometry, aff, 64);
   const auto& nodes = animation.instance_nodes();
   for (uint32_t inst = 0; inst < nodes.size(); ++inst) {
     if (nodes[inst] == 0) continue;
     core::Aabb box;
-    for (const core::Aabb& b : transmissive_runs(aff.nodes[nodes[inst]].geometry, aff.materials, 1)) box.extend(b);
+    for (const core::Aabb& b : transmissive_runs(aff.nodes[nodes[inst]].geometry, aff, 1)) box.extend(b);
     if (!box.empty()) object_boxes_.emplace_back(inst, box);
   }
-  for (const AffAnimatedTriangle& t : aff.animated_triangles) {
-    unknown_ |= t.material < aff.materials.size() && aff.materials[t.material].transmittance > 0.0f;
-  }
+  unknown_ = aff.deforming_transmissive();
 }
 
 bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {

@@ -302,6 +302,11 @@ TestScene room() {
   return s;
 }
 
+/// A view of room() from the front, above the floor.
+Camera room_camera(int width, int height) {
+  return Camera::look_at({0.5f, -4.0f, 2.5f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 60.0f, width, height);
+}
+
 TEST(Whitted, TheFourModesDifferExactlyInTheEffectsTheyInclude) {
   const TestScene s = room();
   const Camera cam = Camera::look_at({0.0f, -4.0f, 3.0f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 50.0f, 64, 48);
@@ -337,7 +342,7 @@ TEST(Whitted, TheFourModesDifferExactlyInTheEffectsTheyInclude) {
 
 TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
   const TestScene s = room();
-  const Camera cam = Camera::look_at({0.5f, -4.0f, 2.5f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 60.0f, 80, 56);
+  const Camera cam = room_camera(80, 56);
   WhittedOptions o;
   o.mode = ShadingMode::kAll;
   o.threads = 1;
@@ -414,7 +419,7 @@ TEST(Whitted, SecondaryRayOffsetsHoldFromTinyToHugeCoordinates) {
 TEST(Whitted, ImagePixelsEqualSingleRaysThroughThem) {
   // camera rays are not unit length: shading must not care (Fresnel, highlights, refraction)
   const TestScene s = room();
-  const Camera cam = Camera::look_at({0.5f, -4.0f, 2.5f}, {0.0f, 0.5f, 0.3f}, {0, 0, 1}, 60.0f, 40, 30);
+  const Camera cam = room_camera(40, 30);
   WhittedOptions o;
   o.mode = ShadingMode::kAll;
   o.threads = 2;

@@ -124,6 +124,7 @@ class KdTree {
   std::vector<KdNode> nodes_;
   std::vector<uint32_t> prim_refs_;
   Aabb bounds_;
+  Aabb view_bounds_;  ///< bounds_ widened for the kernels, worked out once (view() is per packet)
 };
 
 }  // namespace artrace::core

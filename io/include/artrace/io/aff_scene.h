@@ -89,6 +89,10 @@ struct AffScene {
   size_t triangle_count() const;
   /// Triangles that never move (in nodes with no animated ancestor).
   size_t static_triangle_count() const;
+  /// The light material `material` lets through, in [0, 1] (0 for an index out of range).
+  float transmittance(uint32_t material) const;
+  /// Whether an animated (deforming) triangle is transmissive.
+  bool deforming_transmissive() const;
   /// The camera at time t: the `camera` animation when there is one (a camera looking down -z
   /// with +y up, moved by it), else the `v` view. Field of view from `v` (45 degrees without).
   core::Camera camera_at(double t, int width, int height) const;
