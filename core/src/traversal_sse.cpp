@@ -63,7 +63,7 @@ bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t pri
   const float* const dir[3] = {&ray.dir.x, &ray.dir.y, &ray.dir.z};
   RayGroup<1> g;
   init_group<1>(g, org, dir, &ray.tmin, lane);
-  BestHits<1> best{hit.t, hit.u, hit.v, hit.prim, hit.inst, 0, 1.0f};
+  BestHits<1> best{hit.t, hit.u, hit.v, hit.prim, hit.inst, 0, 1.0f, kInvalidId};
   if (!intersect_triangle<1, false>(g, tri, prim, -1, best)) return false;
   hit.t = best.t;
   hit.u = best.u;

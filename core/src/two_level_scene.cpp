@@ -301,17 +301,32 @@ void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& h
   packet_kernels().two_level_intersect(view, rays, mask, hits);
 }
 
-LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask) const {
+KdTreeView TwoLevelScene::static_view(ShadowHint* hint) const {
+  KdTreeView kd = kd_.view();
+  kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
+  if (hint) {
+    if (hint->static_prim != kInvalidId && hint->static_prim >= kd_.triangles().size()) hint->static_prim = kInvalidId;
+    kd.hint = &hint->static_prim;
+  }
+  return kd;
+}
+
+LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint) const {
   require_committed(dirty_);
   mask &= kAllLanes;
-  LaneMask blocked = config_ == Config::kKdTreeBvh ? kd_.occluded(rays, mask) : 0u;
+  LaneMask blocked = 0;
+  if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
+    KdTreeView kd = static_view(hint);
+    kd.pass = nullptr;  // any hit: everything blocks
+    blocked = packet_kernels().occluded(kd, rays, mask);
+  }
   const LaneMask rest = mask & ~blocked;
   if (top_.empty() || rest == 0) return blocked;
   const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
   return blocked | packet_kernels().two_level_occluded(view, rays, rest);
 }
 
-LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, float* trans) const {
+LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint) const {
   require_committed(dirty_);
   mask &= kAllLanes;
   for (int i = 0; i < kPacketSize; ++i) {
@@ -319,9 +334,7 @@ LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, floa
   }
   LaneMask unsure = 0;
   if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
-    KdTreeView kd = kd_.view();
-    kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
-    unsure = packet_kernels().transmittance(kd, rays, mask, trans);
+    unsure = packet_kernels().transmittance(static_view(hint), rays, mask, trans);
   }
   LaneMask rest = 0;
   for (int i = 0; i < kPacketSize; ++i) {

@@ -161,7 +161,8 @@ class WaveTracer {
  public:
   /// `spread`: footprint of a pixel per unit of distance (0: textures at full resolution).
   WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const Prepared& pre, float spread = 0.0f)
-      : s_(s), o_(o), c_(c), boxes_(pre.have_boxes ? &pre.boxes : nullptr), pre_(pre), spread_(spread) {}
+      : s_(s), o_(o), c_(c), boxes_(pre.have_boxes ? &pre.boxes : nullptr), pre_(pre), spread_(spread),
+        hints_(s.lights.size()) {}
 
   /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
   void run(std::vector<Pending>& gen, std::vector<Pending>& next, glm::vec3* color) {
@@ -240,7 +241,8 @@ class WaveTracer {
     if (hit_mask == 0) return;
 
     // direct light, with shadow packets per light
-    for (const PointLight& light : s_.lights) {
+    for (size_t li = 0; li < s_.lights.size(); ++li) {
+      const PointLight& light = s_.lights[li];
       glm::vec3 contrib[kPacketSize];
       LaneMask lit = 0;
       RayPacket shadow;
@@ -280,13 +282,13 @@ class WaveTracer {
         if (pre_.one_traversal) {
           // one traversal that sees through the marked glass and multiplies its transmittance;
           // the rare unsure lanes are walked
-          const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans);
+          const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans, &hints_[li]);
           for (int i = 0; i < n; ++i) {
             if ((unsure >> i) & 1u) trans[i] = 0.0f;
           }
           if (unsure) transmission(shadow, unsure, trans);
         } else {
-          const LaneMask blocked = s_.geometry->occluded(shadow, lit);
+          const LaneMask blocked = s_.geometry->occluded(shadow, lit, &hints_[li]);
           LaneMask walk = 0;
           for (int i = 0; i < n; ++i) {
             if (!((blocked >> i) & 1u)) continue;
@@ -396,6 +398,7 @@ class WaveTracer {
   const std::vector<Aabb>* boxes_;
   const Prepared& pre_;
   float spread_ = 0.0f;
+  std::vector<ShadowHint> hints_;  ///< per light: the last static triangle that blocked a shadow packet
 };
 
 void check(const ShadingScene& scene) {

@@ -178,7 +178,7 @@ float transmittance_brute_force(const Ray& r, const std::vector<Triangle>& tris,
   return t;
 }
 
-TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnce) {
+TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrWithoutHints) {
   // A static soup, one rigid mesh instanced in place (identity, so that both sides test the same
   // coordinates), and two large panes that cross many kd-tree leaves: a ray meeting a pane in two
   // leaves must still count it once (0.5, not 0.25). Segments end inside the scene.
@@ -212,7 +212,8 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnce) {
       if (!simd_level_supported(level)) continue;
       set_simd_level(level);
       std::mt19937 r2(5);
-      size_t unsure_lanes = 0, partial = 0, counted = 0;
+      size_t unsure_lanes = 0, partial = 0, counted = 0, hinted = 0;
+      ShadowHint natural;  // the last blocker, as a renderer keeps it
       for (int p = 0; p < 400; ++p) {
         RayPacket packet;
         const glm::vec3 light = test::random_point(r2, 0.0f, 10.0f);
@@ -223,6 +224,29 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnce) {
         float trans[kPacketSize];
         const LaneMask unsure = scene.transmittance(packet, kAllLanes, trans);
         const LaneMask blocked = scene.occluded(packet, kAllLanes);
+        // Hints change the work, never the answer: the natural one, and one naming any triangle
+        // (transmissive ones, or past the end, included).
+        ShadowHint wild;
+        wild.static_prim = static_cast<uint32_t>(r2() % (ground.size() + 40));
+        for (ShadowHint* hint : {&natural, &wild}) {
+          float hinted_trans[kPacketSize];
+          const uint32_t before = hint->static_prim;
+          ASSERT_EQ(scene.transmittance(packet, kAllLanes, hinted_trans, hint), unsure);
+          for (int i = 0; i < kPacketSize; ++i) {
+            if (!((unsure >> i) & 1u)) {
+              ASSERT_EQ(hinted_trans[i], trans[i]) << to_string(level) << " packet " << p << " lane " << i;
+            }
+          }
+          if (config == Config::kKdTreeBvh && before != kInvalidId && before >= ground.size()) {
+            ASSERT_NE(hint->static_prim, before) << "a hint past the end is dropped";
+          }
+          if (hint->static_prim != before && hint->static_prim != kInvalidId) {  // a new blocker: opaque
+            ASSERT_LT(hint->static_prim, ground.size());
+            ASSERT_EQ(ground_pass[hint->static_prim], 0.0f);
+          }
+          ASSERT_EQ(scene.occluded(packet, kAllLanes, hint), blocked) << to_string(level) << " packet " << p;
+          hinted += hint == &natural && before != kInvalidId;
+        }
         for (int i = 0; i < kPacketSize; ++i) {
           if ((unsure >> i) & 1u) {
             ++unsure_lanes;
@@ -240,6 +264,9 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnce) {
       }
       EXPECT_LE(unsure_lanes, counted / 100) << "unsure answers should be rare";
       EXPECT_GT(partial, counted / 10) << "the test must exercise transmissive crossings";
+      if (config == Config::kKdTreeBvh) {
+        EXPECT_GT(hinted, 100u) << "the natural hint must be exercised";
+      }
     }
   }
   set_simd_level(saved);

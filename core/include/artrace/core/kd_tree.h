@@ -91,6 +91,10 @@ struct KdTreeView {
   Aabb bounds;
   /// Transmittance queries: light passing each triangle (0 or null: opaque).
   const float* pass = nullptr;
+  /// Any-hit and transmittance packets: an opaque triangle worth testing first (the last packet's
+  /// blocker, see ShadowHint); the kernels update it. Null: none. It changes the work, never the
+  /// answer: a lane it blocks is blocked by a triangle the traversal would also have found.
+  uint32_t* hint = nullptr;
 };
 
 class KdTree {

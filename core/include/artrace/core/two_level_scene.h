@@ -22,6 +22,14 @@ namespace artrace::core {
 /// `Hit::inst` of hits on the static geometry.
 inline constexpr uint32_t kStaticObject = 0xfffffffeu;
 
+/// Shadow-ray coherence (a "last occluder" cache): the static triangle that blocked the previous
+/// packet towards the same light is tested before the traversal, and a packet it blocks entirely
+/// skips it. Keep one per light and per thread, for one scene; a fresh one is empty. It changes
+/// the work, never the answer (the triangle is tested exactly as the traversal would test it).
+struct ShadowHint {
+  uint32_t static_prim = kInvalidId;
+};
+
 struct TopNode {
   Aabb bounds;
   uint32_t first = 0;  ///< inner: left child (right = first + 1); leaf: first entry of `order`
@@ -113,7 +121,7 @@ class TwoLevelScene {
   Hit intersect(const Ray& ray) const;
   bool occluded(const Ray& ray) const;
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
-  LaneMask occluded(const RayPacket& rays, LaneMask mask) const;
+  LaneMask occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint = nullptr) const;
 
   /// Light passing each triangle, for shadow rays through glass: pass[i] in (0, 1] for a
   /// transmissive triangle, 0 for an opaque one. For the static geometry (call after set_static,
@@ -128,7 +136,7 @@ class TwoLevelScene {
   /// transmittance of every transmissive triangle the segment (tmin, tmax] crosses, each once, or
   /// 0 when it crosses an opaque one. Returns the lanes whose answer is unsure (a packet crossing
   /// more than 16 distinct transmissive triangles of the static kd-tree; walk those instead).
-  LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans) const;
+  LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint = nullptr) const;
 
   /// The triangle a hit names, in world space.
   Triangle world_triangle(const Hit& hit) const;
@@ -149,6 +157,9 @@ class TwoLevelScene {
   const KdTree* static_kd_tree() const { return config_ == Config::kKdTreeBvh ? &kd_ : nullptr; }
 
  private:
+  /// The static kd-tree's view with its transmittance and `hint` (checked against its size).
+  KdTreeView static_view(ShadowHint* hint) const;
+
   struct Instance {
     uint32_t mesh = kInvalidId;
     uint32_t generation = 0;
