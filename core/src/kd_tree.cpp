@@ -38,8 +38,13 @@ void walk(const KdTree& tree, uint32_t index, const Aabb& voxel, uint32_t depth,
 
 }  // namespace
 
-KdTreeView KdTree::view() const {
-  return {nodes_.data(), prim_refs_.data(), tris_.data(), view_bounds_};
+KdTreeView KdTree::view(ShadowHint* hint) const {
+  KdTreeView v{nodes_.data(), prim_refs_.data(), tris_.data(), view_bounds_};
+  if (hint) {
+    if (hint->prim != kInvalidId && hint->prim >= tris_.size()) hint->prim = kInvalidId;
+    v.hint = &hint->prim;
+  }
+  return v;
 }
 
 Hit KdTree::intersect(const Ray& ray) const {
@@ -68,10 +73,10 @@ void KdTree::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) co
   packet_kernels().intersect(view(), rays, mask, hits);
 }
 
-LaneMask KdTree::occluded(const RayPacket& rays, LaneMask mask) const {
+LaneMask KdTree::occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint) const {
   mask &= kAllLanes;
   if (prim_refs_.empty() || mask == 0) return 0;
-  return packet_kernels().occluded(view(), rays, mask);
+  return packet_kernels().occluded(view(hint), rays, mask);
 }
 
 KdTreeStats KdTree::stats(const KdTreeBuildOptions& opt) const {

@@ -301,24 +301,12 @@ void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& h
   packet_kernels().two_level_intersect(view, rays, mask, hits);
 }
 
-KdTreeView TwoLevelScene::static_view(ShadowHint* hint) const {
-  KdTreeView kd = kd_.view();
-  kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
-  if (hint) {
-    if (hint->static_prim != kInvalidId && hint->static_prim >= kd_.triangles().size()) hint->static_prim = kInvalidId;
-    kd.hint = &hint->static_prim;
-  }
-  return kd;
-}
-
 LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint) const {
   require_committed(dirty_);
   mask &= kAllLanes;
   LaneMask blocked = 0;
   if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
-    KdTreeView kd = static_view(hint);
-    kd.pass = nullptr;  // any hit: everything blocks
-    blocked = packet_kernels().occluded(kd, rays, mask);
+    blocked = kd_.occluded(rays, mask, hint);
   }
   const LaneMask rest = mask & ~blocked;
   if (top_.empty() || rest == 0) return blocked;
@@ -334,7 +322,9 @@ LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, floa
   }
   LaneMask unsure = 0;
   if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
-    unsure = packet_kernels().transmittance(static_view(hint), rays, mask, trans);
+    KdTreeView kd = kd_.view(hint);
+    kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
+    unsure = packet_kernels().transmittance(kd, rays, mask, trans);
   }
   LaneMask rest = 0;
   for (int i = 0; i < kPacketSize; ++i) {

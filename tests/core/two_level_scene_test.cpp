@@ -227,10 +227,10 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
         // Hints change the work, never the answer: the natural one, and one naming any triangle
         // (transmissive ones, or past the end, included).
         ShadowHint wild;
-        wild.static_prim = static_cast<uint32_t>(r2() % (ground.size() + 40));
+        wild.prim = static_cast<uint32_t>(r2() % (ground.size() + 40));
         for (ShadowHint* hint : {&natural, &wild}) {
           float hinted_trans[kPacketSize];
-          const uint32_t before = hint->static_prim;
+          const uint32_t before = hint->prim;
           ASSERT_EQ(scene.transmittance(packet, kAllLanes, hinted_trans, hint), unsure);
           for (int i = 0; i < kPacketSize; ++i) {
             if (!((unsure >> i) & 1u)) {
@@ -238,11 +238,11 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
             }
           }
           if (config == Config::kKdTreeBvh && before != kInvalidId && before >= ground.size()) {
-            ASSERT_NE(hint->static_prim, before) << "a hint past the end is dropped";
+            ASSERT_NE(hint->prim, before) << "a hint past the end is dropped";
           }
-          if (hint->static_prim != before && hint->static_prim != kInvalidId) {  // a new blocker: opaque
-            ASSERT_LT(hint->static_prim, ground.size());
-            ASSERT_EQ(ground_pass[hint->static_prim], 0.0f);
+          if (hint->prim != before && hint->prim != kInvalidId) {  // a new blocker: opaque
+            ASSERT_LT(hint->prim, ground.size());
+            ASSERT_EQ(ground_pass[hint->prim], 0.0f);
           }
           ASSERT_EQ(scene.occluded(packet, kAllLanes, hint), blocked) << to_string(level) << " packet " << p;
           hinted += hint == &natural && before != kInvalidId;

@@ -84,6 +84,14 @@ struct KdTreeStats {
 };
 
 /// Read-only view of a built tree, as the traversal kernels see it.
+/// Shadow-ray coherence (a "last occluder" cache): the kd-tree triangle that blocked the previous
+/// packet towards the same light is tested before the traversal, and lanes it blocks skip it.
+/// Keep one per light and per thread, for one tree; a fresh one is empty. It changes the work,
+/// never the answer (the triangle is tested exactly as the traversal would test it).
+struct ShadowHint {
+  uint32_t prim = kInvalidId;
+};
+
 struct KdTreeView {
   const KdNode* nodes;
   const uint32_t* prim_refs;
@@ -111,15 +119,16 @@ class KdTree {
 
   /// Closest hits for the lanes in `mask`; other lanes of `hits` are left untouched.
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
-  /// Returns the subset of `mask` whose rays are blocked.
-  LaneMask occluded(const RayPacket& rays, LaneMask mask) const;
+  /// Returns the subset of `mask` whose rays are blocked; `hint` (optional) is tried first and updated.
+  LaneMask occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint = nullptr) const;
 
   const std::vector<KdNode>& nodes() const { return nodes_; }
   const std::vector<uint32_t>& prim_refs() const { return prim_refs_; }
   const std::vector<Triangle>& triangles() const { return tris_; }
   const Aabb& bounds() const { return bounds_; }
-  /// The arrays the kernels read, with the root box slightly widened for robust clipping.
-  KdTreeView view() const;
+  /// The arrays the kernels read, with the root box slightly widened for robust clipping, and
+  /// `hint` (emptied when it names no triangle of this tree).
+  KdTreeView view(ShadowHint* hint = nullptr) const;
   /// Walks the tree and computes its statistics (including the SAH cost).
   KdTreeStats stats(const KdTreeBuildOptions& opt = {}) const;
 

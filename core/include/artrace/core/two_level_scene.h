@@ -22,13 +22,6 @@ namespace artrace::core {
 /// `Hit::inst` of hits on the static geometry.
 inline constexpr uint32_t kStaticObject = 0xfffffffeu;
 
-/// Shadow-ray coherence (a "last occluder" cache): the static triangle that blocked the previous
-/// packet towards the same light is tested before the traversal, and a packet it blocks entirely
-/// skips it. Keep one per light and per thread, for one scene; a fresh one is empty. It changes
-/// the work, never the answer (the triangle is tested exactly as the traversal would test it).
-struct ShadowHint {
-  uint32_t static_prim = kInvalidId;
-};
 
 struct TopNode {
   Aabb bounds;
@@ -121,6 +114,7 @@ class TwoLevelScene {
   Hit intersect(const Ray& ray) const;
   bool occluded(const Ray& ray) const;
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
+  /// `hint` (optional, see ShadowHint) serves the static kd-tree of the kdtree+bvh configuration.
   LaneMask occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint = nullptr) const;
 
   /// Light passing each triangle, for shadow rays through glass: pass[i] in (0, 1] for a
@@ -157,9 +151,6 @@ class TwoLevelScene {
   const KdTree* static_kd_tree() const { return config_ == Config::kKdTreeBvh ? &kd_ : nullptr; }
 
  private:
-  /// The static kd-tree's view with its transmittance and `hint` (checked against its size).
-  KdTreeView static_view(ShadowHint* hint) const;
-
   struct Instance {
     uint32_t mesh = kInvalidId;
     uint32_t generation = 0;
