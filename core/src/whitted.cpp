@@ -162,7 +162,7 @@ class WaveTracer {
   /// `spread`: footprint of a pixel per unit of distance (0: textures at full resolution).
   WaveTracer(const ShadingScene& s, const WhittedOptions& o, Counters& c, const Prepared& pre, float spread = 0.0f)
       : s_(s), o_(o), c_(c), boxes_(pre.have_boxes ? &pre.boxes : nullptr), pre_(pre), spread_(spread),
-        hints_(s.lights.size()) {}
+        hints_(s.lights.size()), light_lanes_(s.lights.size()) {}
 
   /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
   void run(std::vector<Pending>& gen, std::vector<Pending>& next, glm::vec3* color) {
@@ -240,12 +240,19 @@ class WaveTracer {
     }
     if (hit_mask == 0) return;
 
-    // direct light, with shadow packets per light
-    for (size_t li = 0; li < s_.lights.size(); ++li) {
+    // Direct light. First every light's lanes, contributions and shadow rays (one origin per hit),
+    // then all the shadow packets in one go, then the sums.
+    glm::vec3 shadow_org[kPacketSize];
+    if (has_shadows(o_.mode)) {
+      for (int i = 0; i < n; ++i) {
+        if ((hit_mask >> i) & 1u) shadow_org[i] = offset_ray_origin(pt[i].p, pt[i].ng, pt[i].magnitude);
+      }
+    }
+    const size_t light_count = s_.lights.size();
+    for (size_t li = 0; li < light_count; ++li) {
       const PointLight& light = s_.lights[li];
-      glm::vec3 contrib[kPacketSize];
-      LaneMask lit = 0;
-      RayPacket shadow;
+      LightLanes& ll = light_lanes_[li];
+      ll.lit = 0;
       for (int i = 0; i < n; ++i) {
         if (!((hit_mask >> i) & 1u)) continue;
         const Point& q = pt[i];
@@ -262,45 +269,31 @@ class WaveTracer {
           const float rv = glm::dot(2.0f * ndl * q.ns - l, q.view);
           if (rv > min_cos) c += q.specular * std::pow(rv, q.m->shine);
         }
-        contrib[i] = c * light.color;
-        lit |= 1u << i;
+        ll.contrib[i] = c * light.color;
+        ll.lit |= 1u << i;
+        ll.trans[i] = 1.0f;
         if (has_shadows(o_.mode)) {
           Ray sr;
-          sr.org = offset_ray_origin(q.p, q.ng, q.magnitude);
+          sr.org = shadow_org[i];
           sr.dir = l;
           sr.tmin = 0.0f;
           sr.tmax = glm::length(light.position - sr.org);
-          shadow.set(i, sr);
+          ll.shadow.set(i, sr);
         }
       }
-      if (lit == 0) continue;
-      float trans[kPacketSize];
-      for (float& t : trans) t = 1.0f;
-      if (has_shadows(o_.mode)) {
-        const auto s0 = Clock::now();
-        c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
-        if (pre_.one_traversal) {
-          // one traversal that sees through the marked glass and multiplies its transmittance;
-          // the rare unsure lanes are walked
-          const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans, &hints_[li]);
-          for (int i = 0; i < n; ++i) {
-            if ((unsure >> i) & 1u) trans[i] = 0.0f;
-          }
-          if (unsure) transmission(shadow, unsure, trans);
-        } else {
-          const LaneMask blocked = s_.geometry->occluded(shadow, lit, &hints_[li]);
-          LaneMask walk = 0;
-          for (int i = 0; i < n; ++i) {
-            if (!((blocked >> i) & 1u)) continue;
-            trans[i] = 0.0f;
-            if (pre_.transmissive && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
-          }
-          if (walk) transmission(shadow, walk, trans);
-        }
-        c_.shadow_ms += ms(s0, Clock::now());
+    }
+    if (has_shadows(o_.mode)) {
+      const auto s0 = Clock::now();
+      for (size_t li = 0; li < light_count; ++li) {
+        LightLanes& ll = light_lanes_[li];
+        if (ll.lit) shadow_packet(ll.shadow, ll.lit, ll.trans, hints_[li]);
       }
+      c_.shadow_ms += ms(s0, Clock::now());
+    }
+    for (size_t li = 0; li < light_count; ++li) {
+      const LightLanes& ll = light_lanes_[li];
       for (int i = 0; i < n; ++i) {
-        if ((lit >> i) & 1u) color[rays[i].lane] += rays[i].weight * contrib[i] * trans[i];
+        if ((ll.lit >> i) & 1u) color[rays[i].lane] += rays[i].weight * ll.contrib[i] * ll.trans[i];
       }
     }
 
@@ -328,6 +321,30 @@ class WaveTracer {
         if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(-q.view, q.ng);
         push(next, q, q.ng, dir, wr, r);
       }
+    }
+  }
+
+  /// The light reaching the lanes of `lit` through `shadow` (0 blocked, 1 free, or what glass
+  /// lets through) into trans[lane].
+  void shadow_packet(const RayPacket& shadow, LaneMask lit, float* trans, ShadowHint& hint) {
+    c_.shadow += static_cast<uint64_t>(__builtin_popcount(lit));
+    if (pre_.one_traversal) {
+      // one traversal that sees through the marked glass and multiplies its transmittance; the
+      // rare unsure lanes are walked
+      const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans, &hint);
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((unsure >> i) & 1u) trans[i] = 0.0f;
+      }
+      if (unsure) transmission(shadow, unsure, trans);
+    } else {
+      const LaneMask blocked = s_.geometry->occluded(shadow, lit, &hint);
+      LaneMask walk = 0;
+      for (int i = 0; i < kPacketSize; ++i) {
+        if (!((blocked >> i) & 1u)) continue;
+        trans[i] = 0.0f;
+        if (pre_.transmissive && may_cross_transmissive(shadow.get(i))) walk |= 1u << i;
+      }
+      if (walk) transmission(shadow, walk, trans);
     }
   }
 
@@ -398,7 +415,15 @@ class WaveTracer {
   const std::vector<Aabb>* boxes_;
   const Prepared& pre_;
   float spread_ = 0.0f;
+  /// One light's share of a wave: the lanes it reaches, what it adds there, the shadow rays.
+  struct LightLanes {
+    glm::vec3 contrib[kPacketSize];
+    float trans[kPacketSize];
+    RayPacket shadow;
+    LaneMask lit = 0;
+  };
   std::vector<ShadowHint> hints_;  ///< per light: the last static triangle that blocked a shadow packet
+  std::vector<LightLanes> light_lanes_;
 };
 
 void check(const ShadingScene& scene) {
