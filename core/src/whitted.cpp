@@ -7,6 +7,9 @@
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#if defined(__SSE__)
+#include <immintrin.h>
+#endif
 
 namespace artrace::core {
 
@@ -137,6 +140,71 @@ inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std:
 
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
+// The light loop works on four lanes side by side (GCC vector extensions: one SSE register on the
+// x86-64 baseline), a wave of 8 as two halves. Every lane computes with the same operations, in
+// the same order, as scalar code would, so the result does not depend on the grouping.
+typedef float F4 __attribute__((vector_size(16)));
+typedef int32_t M4 __attribute__((vector_size(16)));
+static_assert(kPacketSize == 8, "the light loop works on a wave of 8 as two halves");
+
+/// Square roots in place.
+inline void sqrt4(F4& x) {
+#if defined(__SSE__)
+  x = (F4)_mm_sqrt_ps((__m128)x);
+#else
+  for (int i = 0; i < 4; ++i) x[i] = std::sqrt(x[i]);
+#endif
+}
+
+/// Bit i set when lane i of the mask is set.
+inline uint32_t bits4(M4 m) {
+#if defined(__SSE__)
+  return static_cast<uint32_t>(_mm_movemask_ps((__m128)m));
+#else
+  uint32_t b = 0;
+  for (int i = 0; i < 4; ++i) b |= (m[i] != 0 ? 1u : 0u) << i;
+  return b;
+#endif
+}
+
+/// The shaded hits of a wave as structure of arrays (two halves of 4), for the light loop.
+struct WaveLanes {
+  F4 p[2][3], ng[2][3], ns[2][3], view[2][3], diffuse[2][3], specular[2][3], org[2][3];
+  F4 min_cos[2];         ///< highlight cut-off cosine (2: none)
+  M4 hit[2], highlight[2];  ///< lanes with a hit; lanes whose material has a highlight
+  float shine[8];
+
+  void gather(const Point* pt, int n, LaneMask hit_mask, const std::vector<float>& highlight_cos, const Material* materials) {
+    for (int i = 0; i < 8; ++i) {
+      const int h = i >> 2, k = i & 3;
+      const Point* q = i < n && ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
+      const glm::vec3 o = q ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
+      for (int a = 0; a < 3; ++a) {
+        p[h][a][k] = q ? q->p[a] : 0.0f;
+        ng[h][a][k] = q ? q->ng[a] : 0.0f;
+        ns[h][a][k] = q ? q->ns[a] : 0.0f;
+        view[h][a][k] = q ? q->view[a] : 0.0f;
+        diffuse[h][a][k] = q ? q->diffuse[a] : 0.0f;
+        specular[h][a][k] = q ? q->specular[a] : 0.0f;
+        org[h][a][k] = o[a];
+      }
+      const float mc = q ? highlight_cos[static_cast<size_t>(q->m - materials)] : 2.0f;
+      min_cos[h][k] = mc;
+      shine[i] = q ? q->m->shine : 0.0f;
+      hit[h][k] = q ? -1 : 0;
+      highlight[h][k] = (q && mc < 1.0f && max3(q->specular) > 0.0f) ? -1 : 0;
+    }
+  }
+};
+
+/// One light's share of a wave: the lanes it reaches, what it adds there, the shadow rays.
+struct LightLanes {
+  glm::vec3 contrib[kPacketSize];
+  float trans[kPacketSize];
+  RayPacket shadow;
+  LaneMask lit = 0;
+};
+
 /// What every tile needs, worked out once per image.
 struct Prepared {
   std::vector<float> highlight_cos;  ///< per material: below this cosine the highlight is under 1e-4
@@ -240,48 +308,12 @@ class WaveTracer {
     }
     if (hit_mask == 0) return;
 
-    // Direct light. First every light's lanes, contributions and shadow rays (one origin per hit),
-    // then all the shadow packets in one go, then the sums.
-    glm::vec3 shadow_org[kPacketSize];
-    if (has_shadows(o_.mode)) {
-      for (int i = 0; i < n; ++i) {
-        if ((hit_mask >> i) & 1u) shadow_org[i] = offset_ray_origin(pt[i].p, pt[i].ng, pt[i].magnitude);
-      }
-    }
+    // Direct light. First every light's lanes, contributions and shadow rays, the lanes side by
+    // side (one origin per hit), then all the shadow packets in one go, then the sums.
+    WaveLanes w;
+    w.gather(pt, n, hit_mask, pre_.highlight_cos, s_.materials.data());
     const size_t light_count = s_.lights.size();
-    for (size_t li = 0; li < light_count; ++li) {
-      const PointLight& light = s_.lights[li];
-      LightLanes& ll = light_lanes_[li];
-      ll.lit = 0;
-      for (int i = 0; i < n; ++i) {
-        if (!((hit_mask >> i) & 1u)) continue;
-        const Point& q = pt[i];
-        const glm::vec3 to_light = light.position - q.p;
-        const float dist = glm::length(to_light);
-        if (!(dist > 0.0f)) continue;
-        const glm::vec3 l = to_light / dist;
-        const float ndl = glm::dot(q.ns, l);
-        if (ndl <= 0.0f || glm::dot(q.ng, l) <= 0.0f) continue;
-        glm::vec3 c = q.diffuse * ndl;
-        const size_t mi = static_cast<size_t>(q.m - s_.materials.data());
-        const float min_cos = pre_.highlight_cos[mi];
-        if (min_cos < 1.0f && max3(q.specular) > 0.0f) {
-          const float rv = glm::dot(2.0f * ndl * q.ns - l, q.view);
-          if (rv > min_cos) c += q.specular * std::pow(rv, q.m->shine);
-        }
-        ll.contrib[i] = c * light.color;
-        ll.lit |= 1u << i;
-        ll.trans[i] = 1.0f;
-        if (has_shadows(o_.mode)) {
-          Ray sr;
-          sr.org = shadow_org[i];
-          sr.dir = l;
-          sr.tmin = 0.0f;
-          sr.tmax = glm::length(light.position - sr.org);
-          ll.shadow.set(i, sr);
-        }
-      }
-    }
+    for (size_t li = 0; li < light_count; ++li) light_lanes(w, s_.lights[li], light_lanes_[li]);
     if (has_shadows(o_.mode)) {
       const auto s0 = Clock::now();
       for (size_t li = 0; li < light_count; ++li) {
@@ -321,6 +353,57 @@ class WaveTracer {
         if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(-q.view, q.ng);
         push(next, q, q.ng, dir, wr, r);
       }
+    }
+  }
+
+  /// One light over the lanes of a wave: which lanes it reaches (in front of both normals), the
+  /// diffuse and highlight it adds there, and their shadow rays.
+  void light_lanes(const WaveLanes& w, const PointLight& light, LightLanes& ll) const {
+    ll.lit = 0;
+    for (int h = 0; h < 2; ++h) {
+      F4 to[3];
+      for (int a = 0; a < 3; ++a) to[a] = light.position[a] - w.p[h][a];
+      F4 dist = (to[0] * to[0] + to[1] * to[1]) + to[2] * to[2];
+      sqrt4(dist);
+      F4 l[3];
+      for (int a = 0; a < 3; ++a) l[a] = to[a] / dist;
+      const F4 ndl = (w.ns[h][0] * l[0] + w.ns[h][1] * l[1]) + w.ns[h][2] * l[2];
+      const F4 ngl = (w.ng[h][0] * l[0] + w.ng[h][1] * l[1]) + w.ng[h][2] * l[2];
+      const F4 zero = {};
+      const M4 ok = w.hit[h] & (dist > zero) & (ndl > zero) & (ngl > zero);
+      const uint32_t lit = bits4(ok);
+      if (!lit) continue;
+      ll.lit |= lit << (4 * h);
+      F4 c[3];
+      for (int a = 0; a < 3; ++a) c[a] = w.diffuse[h][a] * ndl;
+      // Phong highlight: rv = (2 (n.l) n - l) . view, above the material's cut-off
+      const F4 two_ndl = 2.0f * ndl;
+      F4 r[3];
+      for (int a = 0; a < 3; ++a) r[a] = two_ndl * w.ns[h][a] - l[a];
+      const F4 rv = (r[0] * w.view[h][0] + r[1] * w.view[h][1]) + r[2] * w.view[h][2];
+      uint32_t shiny = bits4(ok & w.highlight[h] & (rv > w.min_cos[h]));
+      while (shiny) {
+        const int k = __builtin_ctz(shiny);
+        shiny &= shiny - 1;
+        const float f = std::pow(rv[k], w.shine[4 * h + k]);
+        for (int a = 0; a < 3; ++a) c[a][k] += w.specular[h][a][k] * f;
+      }
+      for (int a = 0; a < 3; ++a) c[a] *= light.color[a];
+      for (int k = 0; k < 4; ++k) {
+        ll.contrib[4 * h + k] = glm::vec3(c[0][k], c[1][k], c[2][k]);
+        ll.trans[4 * h + k] = 1.0f;
+      }
+      if (!has_shadows(o_.mode)) continue;
+      F4 back[3];
+      for (int a = 0; a < 3; ++a) back[a] = light.position[a] - w.org[h][a];
+      F4 tmax = (back[0] * back[0] + back[1] * back[1]) + back[2] * back[2];
+      sqrt4(tmax);
+      for (int a = 0; a < 3; ++a) {
+        std::memcpy(&ll.shadow.org[a][4 * h], &w.org[h][a], sizeof(F4));
+        std::memcpy(&ll.shadow.dir[a][4 * h], &l[a], sizeof(F4));
+      }
+      std::memset(&ll.shadow.tmin[4 * h], 0, sizeof(F4));
+      std::memcpy(&ll.shadow.tmax[4 * h], &tmax, sizeof(F4));
     }
   }
 
@@ -415,13 +498,6 @@ class WaveTracer {
   const std::vector<Aabb>* boxes_;
   const Prepared& pre_;
   float spread_ = 0.0f;
-  /// One light's share of a wave: the lanes it reaches, what it adds there, the shadow rays.
-  struct LightLanes {
-    glm::vec3 contrib[kPacketSize];
-    float trans[kPacketSize];
-    RayPacket shadow;
-    LaneMask lit = 0;
-  };
   std::vector<ShadowHint> hints_;  ///< per light: the last static triangle that blocked a shadow packet
   std::vector<LightLanes> light_lanes_;
 };
