@@ -518,23 +518,27 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
     const auto t0 = Clock::now();
     Counters& c = counters.local();
     WaveTracer tracer(scene, opt, c, pre, 1.0f / cam.fy);
+    // The whole tile is one generation: its primary rays as 4x2 packets, then the reflection and
+    // refraction rays of all its pixels pooled, so that secondary packets (and their shadow
+    // packets) fill their lanes.
+    static_assert(kTileSize * kTileSize <= 256, "a pixel of the tile is a uint8_t lane");
     std::vector<Pending> gen, next;
-    gen.reserve(4 * kPacketSize);
-    next.reserve(4 * kPacketSize);
+    gen.reserve(kTileSize * kTileSize);
+    next.reserve(2 * kTileSize * kTileSize);
+    glm::vec3 color[kTileSize * kTileSize] = {};
     RayPacket rays;
     for (int y = t.y0; y < t.y1; y += 2) {
       for (int x = t.x0; x < t.x1; x += 4) {
         const LaneMask mask = primary_packet(cam, x, y, rays);
-        gen.clear();
         for (int i = 0; i < kPacketSize; ++i) {
-          if ((mask >> i) & 1u) gen.push_back(Pending{rays.get(i), glm::vec3(1.0f), static_cast<uint8_t>(i), 0});
-        }
-        glm::vec3 color[kPacketSize] = {};
-        tracer.run(gen, next, color);
-        for (int i = 0; i < kPacketSize; ++i) {
-          if ((mask >> i) & 1u) img.at(x + i % 4, y + i / 4) = color[i];
+          const int pixel = (y + i / 4 - t.y0) * kTileSize + (x + i % 4 - t.x0);
+          if ((mask >> i) & 1u) gen.push_back(Pending{rays.get(i), glm::vec3(1.0f), static_cast<uint8_t>(pixel), 0});
         }
       }
+    }
+    tracer.run(gen, next, color);
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) img.at(x, y) = color[(y - t.y0) * kTileSize + (x - t.x0)];
     }
     c.total_ms += ms(t0, Clock::now());
   });
