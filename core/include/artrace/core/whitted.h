@@ -2,10 +2,11 @@
 // shadows, mirror reflection and refraction with Fresnel weights and total internal reflection, to a
 // maximum recursion depth (2, as in "A Real-Time Ray Tracer").
 //
-// Rays are traced in waves per 4x2 pixel packet: the primary packet, then the packet's reflection
-// and refraction rays regrouped into packets of 8 (or, with `secondary_packets = false`, traced one
-// by one), and so on. Shadow rays from one wave towards one light form a packet and take the any-hit
-// path; rays blocked only by transmissive surfaces are then walked surface by surface and
+// Rays are traced in generations per 8x8 tile: its primary rays as 4x2 pixel packets, then the
+// reflection and refraction rays of all its pixels regrouped into packets of 8 (or, with
+// `secondary_packets = false`, traced one by one), and so on. Shadow rays from one packet towards
+// one light form a packet and take the any-hit path, the static triangle that blocked the previous
+// such packet tested first (ShadowHint); rays blocked only by transmissive surfaces are then walked surface by surface and
 // attenuated by their transmittance (a semi-transparent quad must not put a city in shadow). When
 // the geometry knows each triangle's transmittance (TwoLevelScene::set_*_transmittance), shadow
 // rays instead see through the glass in one traversal that multiplies its transmittance, which
