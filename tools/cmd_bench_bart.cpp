@@ -167,6 +167,7 @@ void plot(const std::string& title, const std::vector<std::pair<std::string, std
     for (double v : s.second) ymax = std::max(ymax, v);
     n = std::max(n, s.second.size());
   }
+  ymax *= 1.3;  // headroom for the legend above the curves
   const double step = ymax > 100 ? 50 : ymax > 40 ? 10 : ymax > 10 ? 5 : ymax > 4 ? 1 : 0.5;
   ymax = std::ceil(ymax / step) * step;
   auto X = [&](double i) { return left + static_cast<int>((w - left - right) * i / std::max<double>(1, n - 1)); };
@@ -178,7 +179,7 @@ void plot(const std::string& title, const std::vector<std::pair<std::string, std
     std::snprintf(label, sizeof(label), "%g", v);
     cv::putText(img, label, {8, Y(v) + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1, cv::LINE_AA);
   }
-  for (size_t i = 0; i < n; i += n > 400 ? 100 : 50) {
+  for (size_t i = 0; i < n; i += n > 400 ? 100 : n > 100 ? 50 : n > 20 ? 10 : 1) {
     cv::line(img, {X(i), h - bottom}, {X(i), h - bottom + 5}, axis);
     cv::putText(img, std::to_string(i), {X(i) - 10, h - bottom + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1, cv::LINE_AA);
   }
@@ -191,6 +192,12 @@ void plot(const std::string& title, const std::vector<std::pair<std::string, std
   for (size_t s = 0; s < series.size(); ++s) {
     const auto& v = series[s].second;
     for (size_t i = 1; i < v.size(); ++i) cv::line(img, {X(i - 1), Y(v[i - 1])}, {X(i), Y(v[i])}, colours[s % 4], 1, cv::LINE_AA);
+  }
+  // the legend last, on a white box, so that no curve runs through its labels
+  const int rows = static_cast<int>(series.size());
+  cv::rectangle(img, {w - 268, top}, {w - right - 4, top + 20 * rows + 6}, cv::Scalar(255, 255, 255), cv::FILLED);
+  cv::rectangle(img, {w - 268, top}, {w - right - 4, top + 20 * rows + 6}, grid);
+  for (size_t s = 0; s < series.size(); ++s) {
     cv::line(img, {w - 260, top + 10 + 20 * static_cast<int>(s)}, {w - 230, top + 10 + 20 * static_cast<int>(s)}, colours[s % 4], 2);
     cv::putText(img, series[s].first, {w - 222, top + 15 + 20 * static_cast<int>(s)}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1,
                 cv::LINE_AA);
@@ -244,6 +251,9 @@ void run_report(const ReportOptions& ro) {
       char buf[96];
       if (std::isnan(paper)) {
         std::snprintf(buf, sizeof(buf), " - | - |");
+      } else if (ro.frames != 800) {
+        // the paper's time is for all 800 frames: no ratio against a shorter run
+        std::snprintf(buf, sizeof(buf), " %.2f s (800 frames) | - |", paper);
       } else {
         std::snprintf(buf, sizeof(buf), " %.2f s | %.1fx |", paper, paper / ours_all);
       }
