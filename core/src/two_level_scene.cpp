@@ -304,10 +304,7 @@ void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& h
 LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint) const {
   require_committed(dirty_);
   mask &= kAllLanes;
-  LaneMask blocked = 0;
-  if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
-    blocked = kd_.occluded(rays, mask, hint);
-  }
+  LaneMask blocked = config_ == Config::kKdTreeBvh ? kd_.occluded(rays, mask, hint) : 0u;
   const LaneMask rest = mask & ~blocked;
   if (top_.empty() || rest == 0) return blocked;
   const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};

@@ -83,7 +83,6 @@ struct KdTreeStats {
   size_t node_bytes = 0;
 };
 
-/// Read-only view of a built tree, as the traversal kernels see it.
 /// Shadow-ray coherence (a "last occluder" cache): the kd-tree triangle that blocked the previous
 /// packet towards the same light is tested before the traversal, and lanes it blocks skip it.
 /// Keep one per light and per thread, for one tree; a fresh one is empty. It changes the work,
@@ -92,6 +91,7 @@ struct ShadowHint {
   uint32_t prim = kInvalidId;
 };
 
+/// Read-only view of a built tree, as the traversal kernels see it.
 struct KdTreeView {
   const KdNode* nodes;
   const uint32_t* prim_refs;

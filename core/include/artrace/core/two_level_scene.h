@@ -22,7 +22,6 @@ namespace artrace::core {
 /// `Hit::inst` of hits on the static geometry.
 inline constexpr uint32_t kStaticObject = 0xfffffffeu;
 
-
 struct TopNode {
   Aabb bounds;
   uint32_t first = 0;  ///< inner: left child (right = first + 1); leaf: first entry of `order`
