@@ -174,11 +174,13 @@ struct WaveLanes {
   M4 hit[2], highlight[2];  ///< lanes with a hit; lanes whose material has a highlight
   float shine[8];
 
-  void gather(const Point* pt, int n, LaneMask hit_mask, const std::vector<float>& highlight_cos, const Material* materials) {
+  /// `origins`: also the shadow rays' origins (only when shadows are traced).
+  void gather(const Point* pt, LaneMask hit_mask, const std::vector<float>& highlight_cos, const Material* materials,
+              bool origins) {
     for (int i = 0; i < 8; ++i) {
       const int h = i >> 2, k = i & 3;
-      const Point* q = i < n && ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
-      const glm::vec3 o = q ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
+      const Point* q = ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
+      const glm::vec3 o = q && origins ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
       for (int a = 0; a < 3; ++a) {
         p[h][a][k] = q ? q->p[a] : 0.0f;
         ng[h][a][k] = q ? q->ng[a] : 0.0f;
@@ -311,7 +313,7 @@ class WaveTracer {
     // Direct light. First every light's lanes, contributions and shadow rays, the lanes side by
     // side (one origin per hit), then all the shadow packets in one go, then the sums.
     WaveLanes w;
-    w.gather(pt, n, hit_mask, pre_.highlight_cos, s_.materials.data());
+    w.gather(pt, hit_mask, pre_.highlight_cos, s_.materials.data(), has_shadows(o_.mode));
     const size_t light_count = s_.lights.size();
     for (size_t li = 0; li < light_count; ++li) light_lanes(w, s_.lights[li], light_lanes_[li]);
     if (has_shadows(o_.mode)) {
