@@ -180,7 +180,8 @@ void run(const Options& opt) {
   out["kdtree"] = {{"build_ms", build_ms}, {"nodes", st.nodes}, {"node_bytes", st.node_bytes},
                    {"leaves", st.leaves}, {"empty_leaves", st.empty_leaves}, {"prim_refs", st.prim_refs},
                    {"max_depth", st.max_depth}, {"sah_cost", st.sah_cost},
-                   {"build_ns_per_triangle", build_ms * 1e6 / std::max<size_t>(1, tris.size())}};
+                   {"build_ns_per_triangle", build_ms * 1e6 / std::max<size_t>(1, tris.size())},
+                   {"binned_above", opt.build.binned_above}};
 
   Workload primary = primary_rays(cam);
   std::vector<HitPacket> hits(primary.packets.size());
@@ -345,6 +346,9 @@ void add_bench_core_command(CLI::App& app) {
   cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str();
   cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str();
   cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str();
+  cmd->add_option("--binned-above", opt->build.binned_above,
+                  "nodes of more triangles split by binned SAH (0: the exact sweep everywhere)")
+      ->capture_default_str();
   cmd->callback([opt] { run(*opt); });
 }
 

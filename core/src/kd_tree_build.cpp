@@ -35,7 +35,28 @@ inline bool operator<(const Event& a, const Event& b) {
   return a.bits < b.bits;
 }
 
-using EventList = std::vector<Event>;
+/// std::allocator that leaves resized elements uninitialised (the event lists are sized, then
+/// written through pointers).
+template <class T>
+struct UninitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitAllocator<U>;
+  };
+  UninitAllocator() = default;
+  template <class U>
+  UninitAllocator(const UninitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
+using EventList = std::vector<Event, UninitAllocator<Event>>;
 
 enum Side : uint8_t { kBoth = 0, kLeftOnly = 1, kRightOnly = 2 };
 
@@ -182,7 +203,7 @@ class Builder {
       build_small(out, index, voxel, items, n, lists, sizes, depth);
       return;
     }
-    const Split split = n == 0 ? Split{} : find_split(voxel, ev, n);
+    const Split split = may_split(n, depth) ? find_split(voxel, ev, n) : Split{};
     if (is_leaf(split, n, depth)) {
       make_leaf(out, index, ev[0]);
       return;
@@ -194,13 +215,72 @@ class Builder {
     distribute(voxel_left, voxel_right, split, ev, left, right, n_left, n_right);
     for (int a = 0; a < 3; ++a) EventList().swap(ev[a]);
 
+    children(out, index, split, n, [&](Subtree& o, uint32_t i) { build(o, i, voxel_left, left, n_left, depth + 1); },
+             [&](Subtree& o, uint32_t i) { build(o, i, voxel_right, right, n_right, depth + 1); });
+  }
+
+  /// A triangle of a binned node with its bounds clipped to the node.
+  struct Ref {
+    uint32_t tri;
+    Aabb box;
+  };
+  using RefList = std::vector<Ref>;
+
+  /// build() for nodes of more than opt_.binned_above triangles: the split from binned counts,
+  /// the triangles handed down as references with clipped boxes. Smaller nodes, and nodes where
+  /// no binned split pays, continue with sorted events and the exact sweep.
+  void build_binned(Subtree& out, uint32_t index, const Aabb& voxel, RefList refs, int depth) {
+    const uint32_t n = static_cast<uint32_t>(refs.size());
+    const Split split = n > opt_.binned_above ? binned_split(voxel, refs) : Split{};
+    if (n <= opt_.binned_above || is_leaf(split, n, depth)) {
+      EventList ev[3];
+      for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
+      for (const Ref& r : refs) add_events(ev, r.box, r.tri);
+      RefList().swap(refs);
+      for (auto& list : ev) std::sort(list.begin(), list.end());
+      build(out, index, voxel, ev, n, depth);
+      return;
+    }
+    Aabb voxel_left, voxel_right;
+    child_voxels(voxel, split, voxel_left, voxel_right);
+    RefList left, right;
+    left.reserve(n / 2 + n / 8);
+    right.reserve(n / 2 + n / 8);
+    const int a = split.axis;
+    for (const Ref& r : refs) {
+      bool go_left, go_right;
+      classify(r.box.lo[a], r.box.hi[a], split, go_left, go_right);
+      if (go_left && go_right) {
+        const Aabb bl = clipped_bounds(tris_[r.tri], voxel_left);
+        const Aabb br = clipped_bounds(tris_[r.tri], voxel_right);
+        if (!bl.empty()) left.push_back(Ref{r.tri, bl});
+        if (!br.empty()) right.push_back(Ref{r.tri, br});
+      } else if (go_left) {
+        left.push_back(r);
+      } else {
+        right.push_back(r);
+      }
+    }
+    RefList().swap(refs);
+    children(out, index, split, n, [&](Subtree& o, uint32_t i) { build_binned(o, i, voxel_left, std::move(left), depth + 1); },
+             [&](Subtree& o, uint32_t i) { build_binned(o, i, voxel_right, std::move(right), depth + 1); });
+  }
+
+ private:
+  /// Makes `out.nodes[index]` an inner node splitting at `split` and builds its children with
+  /// `build_left(subtree, slot)` and `build_right`: side by side as two tasks (each into a
+  /// subtree of its own, spliced in after) for nodes of at least opt_.parallel_threshold
+  /// triangles, else in place. The layout is the same either way.
+  template <class Left, class Right>
+  void children(Subtree& out, uint32_t index, const Split& split, uint32_t n, const Left& build_left,
+                const Right& build_right) {
     if (n >= opt_.parallel_threshold) {
       Subtree sub_left, sub_right;
       sub_left.nodes.resize(1);
       sub_right.nodes.resize(1);
       tbb::task_group tasks;
-      tasks.run([&] { build(sub_left, 0, voxel_left, left, n_left, depth + 1); });
-      build(sub_right, 0, voxel_right, right, n_right, depth + 1);
+      tasks.run([&] { build_left(sub_left, 0); });
+      build_right(sub_right, 0);
       tasks.wait();
       const uint32_t child = static_cast<uint32_t>(out.nodes.size());
       out.nodes.resize(child + 2);
@@ -211,9 +291,65 @@ class Builder {
       const uint32_t child = static_cast<uint32_t>(out.nodes.size());
       out.nodes.resize(child + 2);
       out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
-      build(out, child, voxel_left, left, n_left, depth + 1);
-      build(out, child + 1, voxel_right, right, n_right, depth + 1);
+      build_left(out, child);
+      build_right(out, child + 1);
     }
+  }
+
+  /// The sides of a triangle whose clipped extent on the split axis is [lo, hi]: one side if it
+  /// ends at or before (starts at or after) the plane, both if it crosses; a triangle lying in
+  /// the plane goes to the side the split chose for it.
+  static void classify(float lo, float hi, const Split& split, bool& go_left, bool& go_right) {
+    if (lo == hi) {
+      go_left = lo < split.pos || (lo == split.pos && split.planar_left);
+      go_right = !go_left;
+    } else {
+      go_left = !(lo >= split.pos);
+      go_right = !(hi <= split.pos);
+    }
+  }
+
+  /// The SAH at the inner boundaries of equal bins over each axis of the voxel, from counts of
+  /// the triangles' (clipped) lower and upper bounds per bin: a triangle counts to the left of
+  /// a boundary when its lower bound's bin lies below it, to the right when its upper bound's
+  /// bin lies at or above it. Integer counts: the same split whatever the thread count.
+  Split binned_split(const Aabb& voxel, const RefList& refs) const {
+    constexpr int kMaxBins = 512;
+    const uint32_t n = static_cast<uint32_t>(refs.size());
+    const int bins = static_cast<int>(std::clamp<uint32_t>(n / 2, 32, kMaxBins));
+    Split best;
+    const float area = voxel.surface_area();
+    if (!(area > 0.0f)) return best;
+    const float inv_area = 1.0f / area;
+    const glm::vec3 e = voxel.extent();
+    uint32_t lower[kMaxBins], upper[kMaxBins];
+    for (int k = 0; k < 3; ++k) {
+      const float lo = voxel.lo[k], hi = voxel.hi[k];
+      if (!(lo < hi)) continue;
+      const float scale = static_cast<float>(bins) / (hi - lo);
+      auto bin = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bins - 1); };
+      std::fill(lower, lower + bins, 0u);
+      std::fill(upper, upper + bins, 0u);
+      for (const Ref& r : refs) {
+        ++lower[bin(r.box.lo[k])];
+        ++upper[bin(r.box.hi[k])];
+      }
+      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
+      const float cap = ea * eb, ring = ea + eb;
+      const float width = (hi - lo) / static_cast<float>(bins);
+      uint32_t n_left = 0, n_right = n;
+      for (int j = 1; j < bins; ++j) {
+        n_left += lower[j - 1];
+        n_right -= upper[j - 1];
+        const float p = lo + width * static_cast<float>(j);
+        if (!(p > lo && p < hi)) continue;
+        const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
+        const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
+        const float cost = sah(p_left, p_right, n_left, n_right);
+        if (cost < best.cost) best = Split{k, p, false, cost};
+      }
+    }
+    return best;
   }
 
  private:
@@ -256,6 +392,14 @@ class Builder {
     box_events(box, i, [&](int a, const Event& e) { out[a][sizes[a]++] = e; });
   }
 
+  /// Whether a split could pay at all: below the depth cap, and more triangles than the least a
+  /// split can cost (lambda K_T, its intersection term being at least 0) pays for as a leaf.
+  /// Where not, the node is a leaf without a sweep: the same tree, less work.
+  bool may_split(uint32_t n, int depth) const {
+    return depth < max_depth_ &&
+           opt_.intersection_cost * static_cast<float>(n) > std::min(1.0f, opt_.empty_bonus) * opt_.traversal_cost;
+  }
+
   /// The SAH termination: no split pays, or the depth cap is reached.
   bool is_leaf(const Split& split, uint32_t n, int depth) const {
     return split.axis < 0 || split.cost >= opt_.intersection_cost * static_cast<float>(n) || depth >= max_depth_;
@@ -265,7 +409,7 @@ class Builder {
   /// clipping and merge as distribute(), on arrays on the stack.
   void build_small(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n,
                    const Event* const ev[3], const size_t sizes[3], int depth) {
-    const Split split = n == 0 ? Split{} : find_split(voxel, ev, sizes, n);
+    const Split split = may_split(n, depth) ? find_split(voxel, ev, sizes, n) : Split{};
     if (is_leaf(split, n, depth)) {
       const uint32_t offset = static_cast<uint32_t>(out.prims.size());
       for (uint32_t i = 0; i < n; ++i) out.prims.push_back(items[i].tri);
@@ -289,13 +433,7 @@ class Builder {
       const Item& it = items[i];
       to_left[i] = to_right[i] = kNone;
       bool go_left, go_right;
-      if (it.lo[a] == it.hi[a]) {
-        go_left = it.lo[a] < split.pos || (it.lo[a] == split.pos && split.planar_left);
-        go_right = !go_left;
-      } else {
-        go_left = !(it.lo[a] >= split.pos);
-        go_right = !(it.hi[a] <= split.pos);
-      }
+      classify(it.lo[a], it.hi[a], split, go_left, go_right);
       if (go_left && go_right) {  // straddling: clipped to each side
         const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
         const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
@@ -376,28 +514,32 @@ class Builder {
       uint32_t n_left = 0, n_right = n;
       const Event* list = lists[k];
       const size_t size = sizes[k];
-      // One pass, counting by type without branching on it (the types come in no predictable
-      // order); the cost is taken once all events at a position are counted.
-      uint32_t ending = 0, planar = 0, starting = 0;
+      // One pass. The events at a position are counted by type in one packed word (21 bits a
+      // type: no branch on the type, which comes in no predictable order); the cost is taken once
+      // all events at a position are counted.
+      uint64_t counts = 0;
       for (size_t i = 0; i < size; ++i) {
-        const uint32_t type = list[i].type();
-        ending += type == kEnd;
-        planar += type == kPlanar;
-        starting += type == kStart;
+        counts += uint64_t{1} << (21u * list[i].type());
         const float p = list[i].pos;
         if (i + 1 < size && list[i + 1].pos == p) continue;
+        const uint32_t ending = static_cast<uint32_t>(counts) & 0x1fffffu;
+        const uint32_t planar = static_cast<uint32_t>(counts >> 21) & 0x1fffffu;
+        const uint32_t starting = static_cast<uint32_t>(counts >> 42);
+        counts = 0;
         n_right -= planar + ending;
         if (p > lo && p < hi) {
           const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
           const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
-          const float cost_pl = sah(p_left, p_right, n_left + planar, n_right);
-          const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
-          const bool planar_left = cost_pl <= cost_pr;
-          const float cost = planar_left ? cost_pl : cost_pr;
+          float cost = sah(p_left, p_right, n_left + planar, n_right);
+          bool planar_left = true;
+          if (planar != 0) {
+            const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
+            planar_left = cost <= cost_pr;
+            if (!planar_left) cost = cost_pr;
+          }
           if (cost < best.cost) best = Split{k, p, planar_left, cost};
         }
         n_left += starting + planar;
-        ending = planar = starting = 0;
       }
     }
     return best;
@@ -450,23 +592,29 @@ class Builder {
     for (int a = 0; a < 3; ++a) {
       std::sort(new_left[a].begin(), new_left[a].end());
       std::sort(new_right[a].begin(), new_right[a].end());
-      left[a].reserve(2 * static_cast<size_t>(n_left));
-      right[a].reserve(2 * static_cast<size_t>(n_right));
-      size_t il = 0, ir = 0;
-      const EventList& nl = new_left[a];
-      const EventList& nr = new_right[a];
+      // at most two events a triangle: written through pointers into lists of that size
+      left[a].resize(2 * static_cast<size_t>(n_left));
+      right[a].resize(2 * static_cast<size_t>(n_right));
+      Event* out_left = left[a].data();
+      Event* out_right = right[a].data();
+      const Event* nl = new_left[a].data();
+      const Event* nl_end = nl + new_left[a].size();
+      const Event* nr = new_right[a].data();
+      const Event* nr_end = nr + new_right[a].size();
       for (const Event& e : ev[a]) {
         const uint8_t s = side[e.tri()];
         if (s == kLeftOnly) {
-          while (il < nl.size() && nl[il] < e) left[a].push_back(nl[il++]);
-          left[a].push_back(e);
+          while (nl != nl_end && *nl < e) *out_left++ = *nl++;
+          *out_left++ = e;
         } else if (s == kRightOnly) {
-          while (ir < nr.size() && nr[ir] < e) right[a].push_back(nr[ir++]);
-          right[a].push_back(e);
+          while (nr != nr_end && *nr < e) *out_right++ = *nr++;
+          *out_right++ = e;
         }
       }
-      left[a].insert(left[a].end(), nl.begin() + static_cast<std::ptrdiff_t>(il), nl.end());
-      right[a].insert(right[a].end(), nr.begin() + static_cast<std::ptrdiff_t>(ir), nr.end());
+      out_left = std::copy(nl, nl_end, out_left);
+      out_right = std::copy(nr, nr_end, out_right);
+      left[a].resize(static_cast<size_t>(out_left - left[a].data()));
+      right[a].resize(static_cast<size_t>(out_right - right[a].data()));
     }
   }
 
@@ -512,33 +660,44 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
   const uint32_t count = static_cast<uint32_t>(tris_.size());
 
   // Triangles with non-finite coordinates can never be hit (the watertight test rejects them);
-  // they are left out so that the sort below sees only ordered positions.
-  EventList ev[3];
-  for (auto& list : ev) list.reserve(2 * static_cast<size_t>(count));
+  // they are left out, so that the splits see only ordered positions.
   uint32_t n = 0;
-  for (uint32_t i = 0; i < count; ++i) {
-    if (!finite(tris_[i])) continue;
-    Aabb box = Aabb::of(tris_[i]);
-    box.lo += 0.0f;  // -0.0 becomes +0.0 (equal to it), as radix_sort needs
-    box.hi += 0.0f;
-    bounds_.extend(box);
-    add_events(ev, box, i);
-    ++n;
-  }
-  tbb::parallel_invoke([&] { radix_sort(ev[0]); }, [&] { radix_sort(ev[1]); }, [&] { radix_sort(ev[2]); });
-
+  for (uint32_t i = 0; i < count; ++i) n += finite(tris_[i]) ? 1u : 0u;
   int max_depth = opt.max_depth;
   if (max_depth <= 0) {
     max_depth = static_cast<int>(8.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
   }
   max_depth = std::min(max_depth, 60);
-
+  Builder builder(tris_, opt, max_depth);
   Subtree tree;
   tree.nodes.resize(1);
+  auto box_of = [&](uint32_t i) {
+    Aabb box = Aabb::of(tris_[i]);
+    box.lo += 0.0f;  // -0.0 becomes +0.0 (equal to it), as radix_sort needs
+    box.hi += 0.0f;
+    return box;
+  };
   if (n == 0) {
     tree.nodes[0] = KdNode::make_leaf(0, 0);
+  } else if (opt.binned_above > 0 && n > opt.binned_above) {
+    std::vector<Builder::Ref> refs;
+    refs.reserve(n);
+    for (uint32_t i = 0; i < count; ++i) {
+      if (!finite(tris_[i])) continue;
+      refs.push_back(Builder::Ref{i, box_of(i)});
+      bounds_.extend(refs.back().box);
+    }
+    builder.build_binned(tree, 0, bounds_, std::move(refs), 0);
   } else {
-    Builder builder(tris_, opt, max_depth);
+    EventList ev[3];
+    for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
+    for (uint32_t i = 0; i < count; ++i) {
+      if (!finite(tris_[i])) continue;
+      const Aabb box = box_of(i);
+      bounds_.extend(box);
+      add_events(ev, box, i);
+    }
+    tbb::parallel_invoke([&] { radix_sort(ev[0]); }, [&] { radix_sort(ev[1]); }, [&] { radix_sort(ev[2]); });
     builder.build(tree, 0, bounds_, ev, n, 0);
   }
   view_bounds_ = padded_root_box(bounds_);

@@ -12,10 +12,26 @@ namespace {
 using test::random_rays;
 using test::random_soup;
 
+void expect_matches_brute_force(const KdTree& tree, const std::vector<Triangle>& tris, const std::vector<Ray>& rays,
+                                const std::string& what);
+
+/// The builds every brute-force test covers: the default (binned splits above 1024 triangles,
+/// the exact sweep below), the exact sweep everywhere, and binned splits down to 16 triangles.
+std::vector<std::pair<std::string, KdTreeBuildOptions>> builds() {
+  KdTreeBuildOptions sweep, binned;
+  sweep.binned_above = 0;
+  binned.binned_above = 16;
+  return {{"default build", KdTreeBuildOptions{}}, {"sweep everywhere", sweep}, {"binned above 16", binned}};
+}
+
 /// Closest hits must name the same triangle as brute force, with t equal to 1e-5 relative.
 void expect_matches_brute_force(const std::vector<Triangle>& tris, const std::vector<Ray>& rays,
                                 const std::string& what) {
-  const KdTree tree(tris);
+  for (const auto& [name, opt] : builds()) expect_matches_brute_force(KdTree(tris, opt), tris, rays, what + ", " + name);
+}
+
+void expect_matches_brute_force(const KdTree& tree, const std::vector<Triangle>& tris, const std::vector<Ray>& rays,
+                                const std::string& what) {
   size_t mismatches = 0, hits = 0;
   for (size_t i = 0; i < rays.size(); ++i) {
     const Hit ref = intersect_brute_force(rays[i], tris);
@@ -121,17 +137,19 @@ TEST(KdTree, AdversarialCasesMatchBruteForce) {
 
 TEST(KdTree, ClosedMeshHasNoLeaks) {
   const auto mesh = test::closed_sphere({5, 5, 5}, 3.0f, 40);
-  const KdTree tree(mesh);
-  std::mt19937 rng(11);
-  int misses = 0;
-  for (int i = 0; i < 20000; ++i) {
-    const glm::vec3 o = glm::vec3(5.0f) + test::random_point(rng, -1.0f, 1.0f);
-    if (!tree.intersect(Ray{o, test::random_direction(rng)}).valid()) ++misses;
+  for (const auto& [name, opt] : builds()) {
+    const KdTree tree(mesh, opt);
+    std::mt19937 rng(11);
+    int misses = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const glm::vec3 o = glm::vec3(5.0f) + test::random_point(rng, -1.0f, 1.0f);
+      if (!tree.intersect(Ray{o, test::random_direction(rng)}).valid()) ++misses;
+    }
+    for (const Triangle& t : mesh) {
+      if (!tree.intersect(Ray{{5, 5, 5}, t.v0 - glm::vec3(5.0f)}).valid()) ++misses;
+    }
+    EXPECT_EQ(misses, 0) << name;
   }
-  for (const Triangle& t : mesh) {
-    if (!tree.intersect(Ray{{5, 5, 5}, t.v0 - glm::vec3(5.0f)}).valid()) ++misses;
-  }
-  EXPECT_EQ(misses, 0);
 }
 
 /// Packets traced by every available kernel equal single rays bit for bit, including packets
@@ -183,19 +201,20 @@ TEST(KdTree, PacketsEqualSingleRaysOnEveryKernel) {
 TEST(KdTree, BuildIsIdenticalForAnyThreadCount) {
   std::mt19937 rng(3);
   const auto tris = random_soup(rng, 30000, 0.3f);
-  KdTreeBuildOptions opt;
-  opt.parallel_threshold = 256;  // many parallel splices even on this small scene
-  auto build = [&](int threads) {
-    tbb::task_arena arena(threads);
-    KdTree tree;
-    arena.execute([&] { tree = KdTree(tris, opt); });
-    return tree;
-  };
-  const KdTree one = build(1), two = build(2), four = build(4);
-  for (const KdTree* other : {&two, &four}) {
-    ASSERT_EQ(one.nodes().size(), other->nodes().size());
-    EXPECT_EQ(0, std::memcmp(one.nodes().data(), other->nodes().data(), one.nodes().size() * sizeof(KdNode)));
-    EXPECT_EQ(one.prim_refs(), other->prim_refs());
+  for (auto [name, opt] : builds()) {
+    opt.parallel_threshold = 256;  // many parallel splices even on this small scene
+    auto build = [&, &opt = opt](int threads) {
+      tbb::task_arena arena(threads);
+      KdTree tree;
+      arena.execute([&] { tree = KdTree(tris, opt); });
+      return tree;
+    };
+    const KdTree one = build(1), two = build(2), four = build(4);
+    for (const KdTree* other : {&two, &four}) {
+      ASSERT_EQ(one.nodes().size(), other->nodes().size()) << name;
+      EXPECT_EQ(0, std::memcmp(one.nodes().data(), other->nodes().data(), one.nodes().size() * sizeof(KdNode))) << name;
+      EXPECT_EQ(one.prim_refs(), other->prim_refs()) << name;
+    }
   }
 }
 
