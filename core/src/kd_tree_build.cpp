@@ -16,24 +16,45 @@ namespace {
 
 enum EventType : uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
 
-/// A triangle's clipped extent entering (start), leaving (end) or lying in (planar) a plane, in
-/// 8 bytes: the triangle index and the type share one word. Sorted by position, then type (end <
-/// planar < start, as the sweep needs), then triangle.
+/// Float bits mapped to unsigned integers in the same order (finite values; -0.0 is made +0.0
+/// first, so that equal positions have equal bits).
+inline uint32_t ordered_bits(float f) {
+  f += 0.0f;
+  uint32_t u;
+  std::memcpy(&u, &f, sizeof(u));
+  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+inline float from_ordered_bits(uint32_t u) {
+  u = (u & 0x80000000u) ? (u & 0x7fffffffu) : ~u;
+  float f;
+  std::memcpy(&f, &u, sizeof(f));
+  return f;
+}
+
+/// A triangle's clipped extent entering (start), leaving (end) or lying in (planar) a plane, as
+/// one 64-bit key: the position's ordered bits, the type (end < planar < start, as the sweep
+/// needs) and the triangle (30 bits). Keys sort by position, then type, then triangle, and
+/// compare as integers.
 struct Event {
-  float pos;
-  uint32_t bits;  ///< tri << 2 | type
+  uint64_t key;
 
   Event() = default;
-  Event(float p, uint32_t tri, uint32_t type) : pos(p), bits(tri << 2 | type) {}
-  uint32_t tri() const { return bits >> 2; }
-  uint32_t type() const { return bits & 3u; }
+  Event(float p, uint32_t tri, uint32_t type)
+      : key(uint64_t{ordered_bits(p)} << 32 | uint64_t{type} << 30 | tri) {}
+  float pos() const { return from_ordered_bits(static_cast<uint32_t>(key >> 32)); }
+  uint32_t pos_bits() const { return static_cast<uint32_t>(key >> 32); }
+  uint32_t tri() const { return static_cast<uint32_t>(key) & 0x3fffffffu; }
+  uint32_t type() const { return static_cast<uint32_t>(key >> 30) & 3u; }
+  /// The same event for triangle number `tri`.
+  Event renumbered(uint32_t tri) const {
+    Event e;
+    e.key = (key & ~uint64_t{0x3fffffffu}) | tri;
+    return e;
+  }
 };
 
-inline bool operator<(const Event& a, const Event& b) {
-  if (a.pos != b.pos) return a.pos < b.pos;
-  if (a.type() != b.type()) return a.type() < b.type();
-  return a.bits < b.bits;
-}
+inline bool operator<(const Event& a, const Event& b) { return a.key < b.key; }
 
 /// std::allocator that leaves resized elements uninitialised (the event lists are sized, then
 /// written through pointers).
@@ -72,16 +93,9 @@ struct Subtree {
   std::vector<uint32_t> prims;
 };
 
-/// Float bits mapped to unsigned integers in the same order (finite values, no -0.0).
-inline uint32_t ordered_bits(float f) {
-  uint32_t u;
-  std::memcpy(&u, &f, sizeof(u));
-  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
 /// Sorts events made in triangle order by (position, type), triangles in order among equals:
 /// the order of operator<, by a stable least-significant-digit radix sort (type, then the
-/// position's bits 11 at a time) instead of a comparison sort. Positions must not be -0.0.
+/// position's bits 11 at a time) instead of a comparison sort.
 void radix_sort(EventList& ev) {
   EventList tmp(ev.size());
   std::vector<uint32_t> count(2048);
@@ -97,9 +111,9 @@ void radix_sort(EventList& ev) {
     for (const Event& e : from) to[count[digit(e)]++] = e;
   };
   pass(ev, tmp, [](const Event& e) { return e.type(); }, 3);
-  pass(tmp, ev, [](const Event& e) { return ordered_bits(e.pos) & 0x7ffu; }, 2048);
-  pass(ev, tmp, [](const Event& e) { return (ordered_bits(e.pos) >> 11) & 0x7ffu; }, 2048);
-  pass(tmp, ev, [](const Event& e) { return ordered_bits(e.pos) >> 22; }, 1024);
+  pass(tmp, ev, [](const Event& e) { return e.pos_bits() & 0x7ffu; }, 2048);
+  pass(ev, tmp, [](const Event& e) { return (e.pos_bits() >> 11) & 0x7ffu; }, 2048);
+  pass(tmp, ev, [](const Event& e) { return e.pos_bits() >> 22; }, 1024);
 }
 
 /// The events of a triangle's box on each axis: `emit(axis, event)`.
@@ -129,18 +143,20 @@ void child_voxels(const Aabb& voxel, const Split& split, Aabb& left, Aabb& right
 /// Sutherland-Hodgman: keeps the part of polygon `in` (n vertices) on one side of a plane.
 int clip_polygon(const glm::vec3* in, int n, glm::vec3* out, int axis, float plane, bool keep_below) {
   int m = 0;
+  const glm::vec3* cur = &in[n - 1];  // edges (cur, nxt), starting with the closing one
+  bool cur_in = keep_below ? (*cur)[axis] <= plane : (*cur)[axis] >= plane;
   for (int i = 0; i < n; ++i) {
-    const glm::vec3& cur = in[i];
-    const glm::vec3& nxt = in[(i + 1) % n];
-    const bool cur_in = keep_below ? cur[axis] <= plane : cur[axis] >= plane;
-    const bool nxt_in = keep_below ? nxt[axis] <= plane : nxt[axis] >= plane;
-    if (cur_in) out[m++] = cur;
+    const glm::vec3* nxt = &in[i];
+    const bool nxt_in = keep_below ? (*nxt)[axis] <= plane : (*nxt)[axis] >= plane;
     if (cur_in != nxt_in) {
-      const float s = (plane - cur[axis]) / (nxt[axis] - cur[axis]);
-      glm::vec3 p = cur + s * (nxt - cur);
+      const float s = (plane - (*cur)[axis]) / ((*nxt)[axis] - (*cur)[axis]);
+      glm::vec3 p = *cur + s * (*nxt - *cur);
       p[axis] = plane;
       out[m++] = p;
     }
+    if (nxt_in) out[m++] = *nxt;
+    cur = nxt;
+    cur_in = nxt_in;
   }
   return m;
 }
@@ -200,7 +216,11 @@ class Builder {
       to_local(ev, items, local, sizes);
       for (int a = 0; a < 3; ++a) EventList().swap(ev[a]);
       const Event* lists[3] = {local[0], local[1], local[2]};
-      build_small(out, index, voxel, items, n, lists, sizes, depth);
+      if (n <= kTiny) {
+        build_tiny(out, index, voxel, items, n, depth);
+      } else {
+        build_small(out, index, voxel, items, n, lists, sizes, depth);
+      }
       return;
     }
     const Split split = may_split(n, depth) ? find_split(voxel, ev, n) : Split{};
@@ -379,9 +399,9 @@ class Builder {
         const Event& e = ev[a][k];
         const uint32_t i = slot[e.tri()];
         Item& it = items[i];
-        if (e.type() != kEnd) it.lo[a] = e.pos;
-        if (e.type() != kStart) it.hi[a] = e.pos;
-        local[a][k] = Event(e.pos, i, e.type());
+        if (e.type() != kEnd) it.lo[a] = e.pos();
+        if (e.type() != kStart) it.hi[a] = e.pos();
+        local[a][k] = e.renumbered(i);
       }
     }
     for (uint32_t i = 0; i < count; ++i) slot[items[i].tri] = kBoth;  // leave the array as found
@@ -411,47 +431,30 @@ class Builder {
                    const Event* const ev[3], const size_t sizes[3], int depth) {
     const Split split = may_split(n, depth) ? find_split(voxel, ev, sizes, n) : Split{};
     if (is_leaf(split, n, depth)) {
-      const uint32_t offset = static_cast<uint32_t>(out.prims.size());
-      for (uint32_t i = 0; i < n; ++i) out.prims.push_back(items[i].tri);
-      std::sort(out.prims.begin() + offset, out.prims.end());
-      out.nodes[index] = KdNode::make_leaf(offset, n);
+      make_leaf(out, index, items, n);
       return;
     }
     Aabb voxel_left, voxel_right;
     child_voxels(voxel, split, voxel_left, voxel_right);
-
-    // Classification (distribute's rules, read off the boxes); one-sided triangles keep their
-    // events under a new local number, straddlers get new events from clipping.
-    Item left[kSmall], right[kSmall];
-    uint8_t to_left[kSmall], to_right[kSmall];  // local number in the child, or kNone
-    constexpr uint8_t kNone = 0xff;
+    Children c;
+    partition(items, n, split, voxel_left, voxel_right, c);
+    const uint32_t child = static_cast<uint32_t>(out.nodes.size());
+    out.nodes.resize(child + 2);
+    out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+    if (c.n_left <= kTiny && c.n_right <= kTiny) {  // no events needed below
+      build_tiny(out, child, voxel_left, c.left, c.n_left, depth + 1);
+      build_tiny(out, child + 1, voxel_right, c.right, c.n_right, depth + 1);
+      return;
+    }
+    // One-sided triangles keep their events under their new local number; clipped ones get new
+    // events, sorted on their own and merged in.
     Event new_left[3][2 * kSmall], new_right[3][2 * kSmall];
     size_t n_new_left[3] = {0, 0, 0}, n_new_right[3] = {0, 0, 0};
-    uint32_t n_left = 0, n_right = 0;
-    const int a = split.axis;
-    for (uint32_t i = 0; i < n; ++i) {
-      const Item& it = items[i];
-      to_left[i] = to_right[i] = kNone;
-      bool go_left, go_right;
-      classify(it.lo[a], it.hi[a], split, go_left, go_right);
-      if (go_left && go_right) {  // straddling: clipped to each side
-        const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
-        const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
-        if (!bl.empty()) {
-          add_local_events(new_left, n_new_left, bl, n_left);
-          left[n_left++] = Item{it.tri, bl.lo, bl.hi};
-        }
-        if (!br.empty()) {
-          add_local_events(new_right, n_new_right, br, n_right);
-          right[n_right++] = Item{it.tri, br.lo, br.hi};
-        }
-      } else if (go_left) {
-        to_left[i] = static_cast<uint8_t>(n_left);
-        left[n_left++] = it;
-      } else {
-        to_right[i] = static_cast<uint8_t>(n_right);
-        right[n_right++] = it;
-      }
+    for (uint32_t i = 0; i < c.n_left; ++i) {
+      if ((c.clipped_left >> i) & 1u) add_local_events(new_left, n_new_left, Aabb{c.left[i].lo, c.left[i].hi}, i);
+    }
+    for (uint32_t i = 0; i < c.n_right; ++i) {
+      if ((c.clipped_right >> i) & 1u) add_local_events(new_right, n_new_right, Aabb{c.right[i].lo, c.right[i].hi}, i);
     }
     Event ev_left[3][2 * kSmall], ev_right[3][2 * kSmall];
     size_t size_left[3], size_right[3];
@@ -462,12 +465,12 @@ class Builder {
       for (size_t j = 0; j < sizes[k]; ++j) {
         const Event& e = ev[k][j];
         const uint32_t i = e.tri();
-        if (to_left[i] != kNone) {
-          const Event moved(e.pos, to_left[i], e.type());
+        if (c.to_left[i] != kNone) {
+          const Event moved = e.renumbered(c.to_left[i]);
           while (il < n_new_left[k] && new_left[k][il] < moved) ev_left[k][sl++] = new_left[k][il++];
           ev_left[k][sl++] = moved;
-        } else if (to_right[i] != kNone) {
-          const Event moved(e.pos, to_right[i], e.type());
+        } else if (c.to_right[i] != kNone) {
+          const Event moved = e.renumbered(c.to_right[i]);
           while (ir < n_new_right[k] && new_right[k][ir] < moved) ev_right[k][sr++] = new_right[k][ir++];
           ev_right[k][sr++] = moved;
         }
@@ -477,13 +480,128 @@ class Builder {
       size_left[k] = sl;
       size_right[k] = sr;
     }
+    const Event* lists_left[3] = {ev_left[0], ev_left[1], ev_left[2]};
+    const Event* lists_right[3] = {ev_right[0], ev_right[1], ev_right[2]};
+    build_small(out, child, voxel_left, c.left, c.n_left, lists_left, size_left, depth + 1);
+    build_small(out, child + 1, voxel_right, c.right, c.n_right, lists_right, size_right, depth + 1);
+  }
+
+  /// Nodes of at most this many triangles find their split without events: every bound of every
+  /// triangle is a candidate, its counts taken over all the triangles (O(n^2), on arrays of
+  /// positions the compiler vectorises). The same candidates, counts, costs and tie-breaks as
+  /// the sweep, so the same tree.
+  static constexpr uint32_t kTiny = 6;
+
+  /// build_small() for a node of at most kTiny triangles, without events.
+  void build_tiny(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n, int depth) {
+    const Split split = may_split(n, depth) ? tiny_split(voxel, items, n) : Split{};
+    if (is_leaf(split, n, depth)) {
+      make_leaf(out, index, items, n);
+      return;
+    }
+    Aabb voxel_left, voxel_right;
+    child_voxels(voxel, split, voxel_left, voxel_right);
+    Children c;
+    partition(items, n, split, voxel_left, voxel_right, c);
     const uint32_t child = static_cast<uint32_t>(out.nodes.size());
     out.nodes.resize(child + 2);
     out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
-    const Event* lists_left[3] = {ev_left[0], ev_left[1], ev_left[2]};
-    const Event* lists_right[3] = {ev_right[0], ev_right[1], ev_right[2]};
-    build_small(out, child, voxel_left, left, n_left, lists_left, size_left, depth + 1);
-    build_small(out, child + 1, voxel_right, right, n_right, lists_right, size_right, depth + 1);
+    build_tiny(out, child, voxel_left, c.left, c.n_left, depth + 1);
+    build_tiny(out, child + 1, voxel_right, c.right, c.n_right, depth + 1);
+  }
+
+  /// find_split() for at most kTiny items, from their boxes. The sweep visits positions in
+  /// increasing order, axis by axis, and keeps the first least cost; here candidates come in any
+  /// order, so an equal cost wins when it comes at a smaller position on the same axis.
+  Split tiny_split(const Aabb& voxel, const Item* items, uint32_t n) const {
+    Split best;
+    const float area = voxel.surface_area();
+    if (!(area > 0.0f)) return best;
+    const float inv_area = 1.0f / area;
+    const glm::vec3 e = voxel.extent();
+    float lows[kTiny], highs[kTiny];
+    for (int k = 0; k < 3; ++k) {
+      const float lo = voxel.lo[k], hi = voxel.hi[k];
+      if (!(lo < hi)) continue;
+      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
+      const float cap = ea * eb, ring = ea + eb;
+      for (uint32_t i = 0; i < n; ++i) {
+        lows[i] = items[i].lo[k];
+        highs[i] = items[i].hi[k];
+      }
+      for (uint32_t c = 0; c < 2 * n; ++c) {
+        const float p = c < n ? lows[c] : highs[c - n];
+        if (!(p > lo && p < hi)) continue;
+        // left: starting before p; right: ending after p; planar: lying in p
+        uint32_t n_left = 0, n_right = 0, planar = 0;
+        for (uint32_t i = 0; i < n; ++i) {
+          n_left += lows[i] < p;
+          n_right += highs[i] > p;
+          planar += (lows[i] == p) & (highs[i] == p);
+        }
+        const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
+        const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
+        float cost = sah(p_left, p_right, n_left + planar, n_right);
+        bool planar_left = true;
+        if (planar != 0) {
+          const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
+          planar_left = cost <= cost_pr;
+          if (!planar_left) cost = cost_pr;
+        }
+        if (cost < best.cost || (cost == best.cost && best.axis == k && p < best.pos)) {
+          best = Split{k, p, planar_left, cost};
+        }
+      }
+    }
+    return best;
+  }
+
+  static constexpr uint8_t kNone = 0xff;
+
+  /// A small node's triangles split between its children.
+  struct Children {
+    Item left[kSmall], right[kSmall];
+    uint32_t n_left = 0, n_right = 0;
+    uint8_t to_left[kSmall], to_right[kSmall];  ///< one-sided items: their number in the child, else kNone
+    uint32_t clipped_left = 0, clipped_right = 0;  ///< bits: the children's items made by clipping
+  };
+
+  /// Classification (distribute's rules, read off the boxes): one-sided triangles are copied,
+  /// straddlers clipped to each side.
+  void partition(const Item* items, uint32_t n, const Split& split, const Aabb& voxel_left, const Aabb& voxel_right,
+                 Children& c) const {
+    const int a = split.axis;
+    for (uint32_t i = 0; i < n; ++i) {
+      const Item& it = items[i];
+      c.to_left[i] = c.to_right[i] = kNone;
+      bool go_left, go_right;
+      classify(it.lo[a], it.hi[a], split, go_left, go_right);
+      if (go_left && go_right) {
+        const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
+        const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
+        if (!bl.empty()) {
+          c.clipped_left |= 1u << c.n_left;
+          c.left[c.n_left++] = Item{it.tri, bl.lo, bl.hi};
+        }
+        if (!br.empty()) {
+          c.clipped_right |= 1u << c.n_right;
+          c.right[c.n_right++] = Item{it.tri, br.lo, br.hi};
+        }
+      } else if (go_left) {
+        c.to_left[i] = static_cast<uint8_t>(c.n_left);
+        c.left[c.n_left++] = it;
+      } else {
+        c.to_right[i] = static_cast<uint8_t>(c.n_right);
+        c.right[c.n_right++] = it;
+      }
+    }
+  }
+
+  static void make_leaf(Subtree& out, uint32_t index, const Item* items, uint32_t n) {
+    const uint32_t offset = static_cast<uint32_t>(out.prims.size());
+    for (uint32_t i = 0; i < n; ++i) out.prims.push_back(items[i].tri);
+    std::sort(out.prims.begin() + offset, out.prims.end());
+    out.nodes[index] = KdNode::make_leaf(offset, n);
   }
 
   float sah(float p_left, float p_right, uint32_t n_left, uint32_t n_right) const {
@@ -520,8 +638,9 @@ class Builder {
       uint64_t counts = 0;
       for (size_t i = 0; i < size; ++i) {
         counts += uint64_t{1} << (21u * list[i].type());
-        const float p = list[i].pos;
-        if (i + 1 < size && list[i + 1].pos == p) continue;
+        const uint32_t bits = list[i].pos_bits();
+        if (i + 1 < size && list[i + 1].pos_bits() == bits) continue;
+        const float p = from_ordered_bits(bits);
         const uint32_t ending = static_cast<uint32_t>(counts) & 0x1fffffu;
         const uint32_t planar = static_cast<uint32_t>(counts >> 21) & 0x1fffffu;
         const uint32_t starting = static_cast<uint32_t>(counts >> 42);
@@ -556,12 +675,12 @@ class Builder {
       if (e.type() != kEnd) side[e.tri()] = kBoth;
     }
     for (const Event& e : list) {
-      if (e.type() == kEnd && e.pos <= split.pos) {
+      if (e.type() == kEnd && e.pos() <= split.pos) {
         side[e.tri()] = kLeftOnly;
-      } else if (e.type() == kStart && e.pos >= split.pos) {
+      } else if (e.type() == kStart && e.pos() >= split.pos) {
         side[e.tri()] = kRightOnly;
       } else if (e.type() == kPlanar) {
-        const bool to_left = e.pos < split.pos || (e.pos == split.pos && split.planar_left);
+        const bool to_left = e.pos() < split.pos || (e.pos() == split.pos && split.planar_left);
         side[e.tri()] = to_left ? kLeftOnly : kRightOnly;
       }
     }
@@ -671,12 +790,6 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
   Builder builder(tris_, opt, max_depth);
   Subtree tree;
   tree.nodes.resize(1);
-  auto box_of = [&](uint32_t i) {
-    Aabb box = Aabb::of(tris_[i]);
-    box.lo += 0.0f;  // -0.0 becomes +0.0 (equal to it), as radix_sort needs
-    box.hi += 0.0f;
-    return box;
-  };
   if (n == 0) {
     tree.nodes[0] = KdNode::make_leaf(0, 0);
   } else if (opt.binned_above > 0 && n > opt.binned_above) {
@@ -684,7 +797,7 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     refs.reserve(n);
     for (uint32_t i = 0; i < count; ++i) {
       if (!finite(tris_[i])) continue;
-      refs.push_back(Builder::Ref{i, box_of(i)});
+      refs.push_back(Builder::Ref{i, Aabb::of(tris_[i])});
       bounds_.extend(refs.back().box);
     }
     builder.build_binned(tree, 0, bounds_, std::move(refs), 0);
@@ -693,7 +806,7 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
     for (uint32_t i = 0; i < count; ++i) {
       if (!finite(tris_[i])) continue;
-      const Aabb box = box_of(i);
+      const Aabb box = Aabb::of(tris_[i]);
       bounds_.extend(box);
       add_events(ev, box, i);
     }

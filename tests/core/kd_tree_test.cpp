@@ -102,6 +102,9 @@ std::vector<Triangle> adversarial_scene() {
   }
   // a floor exactly in the plane y = 0 that the boxes' bottoms share
   quad({-1, 0, -1}, {-1, 0, 9}, {9, 0, 9}, {9, 0, -1});
+  // walls in the plane x = 0 written as -0.0 and as +0.0 (one position to the build)
+  quad({-0.0f, 0, 0}, {-0.0f, 3, 0}, {-0.0f, 3, 3}, {-0.0f, 0, 3});
+  quad({0, 0, 4}, {0, 3, 4}, {0, 3, 7}, {-0.0f, 0, 7});
   // zero-area triangles: a point and a line
   tris.push_back({{3, 3, 3}, {3, 3, 3}, {3, 3, 3}});
   tris.push_back({{0, 2, 0}, {4, 2, 4}, {8, 2, 8}});
