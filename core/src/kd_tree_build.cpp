@@ -142,6 +142,7 @@ void child_voxels(const Aabb& voxel, const Split& split, Aabb& left, Aabb& right
 
 /// Sutherland-Hodgman: keeps the part of polygon `in` (n vertices) on one side of a plane.
 int clip_polygon(const glm::vec3* in, int n, glm::vec3* out, int axis, float plane, bool keep_below) {
+  if (n <= 0) return 0;
   int m = 0;
   const glm::vec3* cur = &in[n - 1];  // edges (cur, nxt), starting with the closing one
   bool cur_in = keep_below ? (*cur)[axis] <= plane : (*cur)[axis] >= plane;
