@@ -785,7 +785,7 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
   for (uint32_t i = 0; i < count; ++i) n += finite(tris_[i]) ? 1u : 0u;
   int max_depth = opt.max_depth;
   if (max_depth <= 0) {
-    max_depth = static_cast<int>(8.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
+    max_depth = static_cast<int>(6.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
   }
   max_depth = std::min(max_depth, 60);
   Builder builder(tris_, opt, max_depth);
