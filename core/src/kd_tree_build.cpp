@@ -7,6 +7,7 @@
 #include <tbb/task_group.h>
 
 #include <algorithm>
+#include <bitset>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -375,8 +376,8 @@ class Builder {
 
  private:
   /// Nodes of at most this many triangles take build_small (its arrays live on the stack:
-  /// about 8 KB a level).
-  static constexpr uint32_t kSmall = 32;
+  /// about 16 KB a level).
+  static constexpr uint32_t kSmall = 64;
 
   /// A triangle of a small node with its bounds clipped to the node (what its events encode).
   struct Item {
@@ -452,10 +453,10 @@ class Builder {
     Event new_left[3][2 * kSmall], new_right[3][2 * kSmall];
     size_t n_new_left[3] = {0, 0, 0}, n_new_right[3] = {0, 0, 0};
     for (uint32_t i = 0; i < c.n_left; ++i) {
-      if ((c.clipped_left >> i) & 1u) add_local_events(new_left, n_new_left, Aabb{c.left[i].lo, c.left[i].hi}, i);
+      if (c.clipped_left[i]) add_local_events(new_left, n_new_left, Aabb{c.left[i].lo, c.left[i].hi}, i);
     }
     for (uint32_t i = 0; i < c.n_right; ++i) {
-      if ((c.clipped_right >> i) & 1u) add_local_events(new_right, n_new_right, Aabb{c.right[i].lo, c.right[i].hi}, i);
+      if (c.clipped_right[i]) add_local_events(new_right, n_new_right, Aabb{c.right[i].lo, c.right[i].hi}, i);
     }
     Event ev_left[3][2 * kSmall], ev_right[3][2 * kSmall];
     size_t size_left[3], size_right[3];
@@ -564,7 +565,7 @@ class Builder {
     Item left[kSmall], right[kSmall];
     uint32_t n_left = 0, n_right = 0;
     uint8_t to_left[kSmall], to_right[kSmall];  ///< one-sided items: their number in the child, else kNone
-    uint32_t clipped_left = 0, clipped_right = 0;  ///< bits: the children's items made by clipping
+    std::bitset<kSmall> clipped_left, clipped_right;  ///< the children's items made by clipping
   };
 
   /// Classification (distribute's rules, read off the boxes): one-sided triangles are copied,
@@ -581,11 +582,11 @@ class Builder {
         const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
         const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
         if (!bl.empty()) {
-          c.clipped_left |= 1u << c.n_left;
+          c.clipped_left.set(c.n_left);
           c.left[c.n_left++] = Item{it.tri, bl.lo, bl.hi};
         }
         if (!br.empty()) {
-          c.clipped_right |= 1u << c.n_right;
+          c.clipped_right.set(c.n_right);
           c.right[c.n_right++] = Item{it.tri, br.lo, br.hi};
         }
       } else if (go_left) {
