@@ -374,7 +374,6 @@ class Builder {
     return best;
   }
 
- private:
   /// Nodes of at most this many triangles take build_small (its arrays live on the stack:
   /// about 16 KB a level).
   static constexpr uint32_t kSmall = 64;
