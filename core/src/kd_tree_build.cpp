@@ -340,14 +340,11 @@ class Builder {
     const uint32_t n = static_cast<uint32_t>(refs.size());
     const int bins = static_cast<int>(std::clamp<uint32_t>(n / 2, 32, kMaxBins));
     Split best;
-    const float area = voxel.surface_area();
-    if (!(area > 0.0f)) return best;
-    const float inv_area = 1.0f / area;
-    const glm::vec3 e = voxel.extent();
+    const Planes pl(opt_, voxel);
     uint32_t lower[kMaxBins], upper[kMaxBins];
     for (int k = 0; k < 3; ++k) {
-      const float lo = voxel.lo[k], hi = voxel.hi[k];
-      if (!(lo < hi)) continue;
+      if (!pl.usable(k)) continue;
+      const float lo = pl.lo(k), hi = pl.hi(k);
       const float scale = static_cast<float>(bins) / (hi - lo);
       auto bin = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bins - 1); };
       std::fill(lower, lower + bins, 0u);
@@ -356,19 +353,17 @@ class Builder {
         ++lower[bin(r.box.lo[k])];
         ++upper[bin(r.box.hi[k])];
       }
-      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
-      const float cap = ea * eb, ring = ea + eb;
       const float width = (hi - lo) / static_cast<float>(bins);
       uint32_t n_left = 0, n_right = n;
       for (int j = 1; j < bins; ++j) {
         n_left += lower[j - 1];
         n_right -= upper[j - 1];
         const float p = lo + width * static_cast<float>(j);
-        if (!(p > lo && p < hi)) continue;
-        const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
-        const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
-        const float cost = sah(p_left, p_right, n_left, n_right);
-        if (cost < best.cost) best = Split{k, p, false, cost};
+        if (!pl.inside(k, p)) continue;
+        // a triangle lying in p was counted on the right (its bin is j): it goes there
+        Split s = pl.at(k, p, n_left, n_right, 0);
+        s.planar_left = false;
+        if (s.cost < best.cost) best = s;
       }
     }
     return best;
@@ -516,23 +511,17 @@ class Builder {
   /// order, so an equal cost wins when it comes at a smaller position on the same axis.
   Split tiny_split(const Aabb& voxel, const Item* items, uint32_t n) const {
     Split best;
-    const float area = voxel.surface_area();
-    if (!(area > 0.0f)) return best;
-    const float inv_area = 1.0f / area;
-    const glm::vec3 e = voxel.extent();
+    const Planes pl(opt_, voxel);
     float lows[kTiny], highs[kTiny];
     for (int k = 0; k < 3; ++k) {
-      const float lo = voxel.lo[k], hi = voxel.hi[k];
-      if (!(lo < hi)) continue;
-      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
-      const float cap = ea * eb, ring = ea + eb;
+      if (!pl.usable(k)) continue;
       for (uint32_t i = 0; i < n; ++i) {
         lows[i] = items[i].lo[k];
         highs[i] = items[i].hi[k];
       }
       for (uint32_t c = 0; c < 2 * n; ++c) {
         const float p = c < n ? lows[c] : highs[c - n];
-        if (!(p > lo && p < hi)) continue;
+        if (!pl.inside(k, p)) continue;
         // left: starting before p; right: ending after p; planar: lying in p
         uint32_t n_left = 0, n_right = 0, planar = 0;
         for (uint32_t i = 0; i < n; ++i) {
@@ -540,18 +529,8 @@ class Builder {
           n_right += highs[i] > p;
           planar += (lows[i] == p) & (highs[i] == p);
         }
-        const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
-        const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
-        float cost = sah(p_left, p_right, n_left + planar, n_right);
-        bool planar_left = true;
-        if (planar != 0) {
-          const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
-          planar_left = cost <= cost_pr;
-          if (!planar_left) cost = cost_pr;
-        }
-        if (cost < best.cost || (cost == best.cost && best.axis == k && p < best.pos)) {
-          best = Split{k, p, planar_left, cost};
-        }
+        const Split s = pl.at(k, p, n_left, n_right, planar);
+        if (s.cost < best.cost || (s.cost == best.cost && best.axis == k && p < best.pos)) best = s;
       }
     }
     return best;
@@ -605,12 +584,58 @@ class Builder {
     out.nodes[index] = KdNode::make_leaf(offset, n);
   }
 
-  float sah(float p_left, float p_right, uint32_t n_left, uint32_t n_right) const {
-    const float lambda = (n_left == 0 || n_right == 0) ? opt_.empty_bonus : 1.0f;
-    return lambda * (opt_.traversal_cost +
-                     opt_.intersection_cost * (p_left * static_cast<float>(n_left) +
-                                               p_right * static_cast<float>(n_right)));
-  }
+  /// The SAH of planes across a voxel (the sweep, the binned and the tiny search all cost their
+  /// candidates here).
+  class Planes {
+   public:
+    Planes(const KdTreeBuildOptions& opt, const Aabb& voxel) : opt_(opt), lo_(voxel.lo), hi_(voxel.hi) {
+      const float area = voxel.surface_area();
+      const glm::vec3 e = voxel.extent();
+      for (int k = 0; k < 3; ++k) {
+        const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
+        cap_[k] = ea * eb;
+        ring_[k] = ea + eb;
+        usable_[k] = area > 0.0f && lo_[k] < hi_[k];
+      }
+      inv_area_ = 1.0f / area;
+    }
+
+    /// Whether any plane across axis k can split the voxel (it has an area and a depth on k).
+    bool usable(int k) const { return usable_[k]; }
+    float lo(int k) const { return lo_[k]; }
+    float hi(int k) const { return hi_[k]; }
+    /// Whether a plane at p on axis k splits the voxel (lies strictly inside it).
+    bool inside(int k, float p) const { return p > lo_[k] && p < hi_[k]; }
+
+    /// The split at p on axis k with n_left triangles starting before p, n_right ending after it
+    /// and `planar` lying in it; those go to the cheaper side, the left one on a tie.
+    Split at(int k, float p, uint32_t n_left, uint32_t n_right, uint32_t planar) const {
+      const float p_left = 2.0f * (cap_[k] + ring_[k] * (p - lo_[k])) * inv_area_;
+      const float p_right = 2.0f * (cap_[k] + ring_[k] * (hi_[k] - p)) * inv_area_;
+      Split s{k, p, true, sah(p_left, p_right, n_left + planar, n_right)};
+      if (planar != 0) {
+        const float cost_right = sah(p_left, p_right, n_left, n_right + planar);
+        if (!(s.cost <= cost_right)) {
+          s.planar_left = false;
+          s.cost = cost_right;
+        }
+      }
+      return s;
+    }
+
+   private:
+    float sah(float p_left, float p_right, uint32_t n_left, uint32_t n_right) const {
+      const float lambda = (n_left == 0 || n_right == 0) ? opt_.empty_bonus : 1.0f;
+      return lambda * (opt_.traversal_cost + opt_.intersection_cost * (p_left * static_cast<float>(n_left) +
+                                                                       p_right * static_cast<float>(n_right)));
+    }
+
+    const KdTreeBuildOptions& opt_;
+    glm::vec3 lo_, hi_;
+    float cap_[3], ring_[3];  ///< a child's area is 2 (cap + ring * its length on the axis)
+    bool usable_[3];
+    float inv_area_;
+  };
 
   Split find_split(const Aabb& voxel, const EventList ev[3], uint32_t n) const {
     const Event* lists[3] = {ev[0].data(), ev[1].data(), ev[2].data()};
@@ -621,15 +646,9 @@ class Builder {
   /// The sweep of Wald & Havran, section 4.2, over each axis' sorted events.
   Split find_split(const Aabb& voxel, const Event* const lists[3], const size_t sizes[3], uint32_t n) const {
     Split best;
-    const float area = voxel.surface_area();
-    if (!(area > 0.0f)) return best;
-    const float inv_area = 1.0f / area;
-    const glm::vec3 e = voxel.extent();
+    const Planes pl(opt_, voxel);
     for (int k = 0; k < 3; ++k) {
-      const float lo = voxel.lo[k], hi = voxel.hi[k];
-      if (!(lo < hi)) continue;
-      const float ea = e[(k + 1) % 3], eb = e[(k + 2) % 3];
-      const float cap = ea * eb, ring = ea + eb;
+      if (!pl.usable(k)) continue;
       uint32_t n_left = 0, n_right = n;
       const Event* list = lists[k];
       const size_t size = sizes[k];
@@ -647,17 +666,9 @@ class Builder {
         const uint32_t starting = static_cast<uint32_t>(counts >> 42);
         counts = 0;
         n_right -= planar + ending;
-        if (p > lo && p < hi) {
-          const float p_left = 2.0f * (cap + ring * (p - lo)) * inv_area;
-          const float p_right = 2.0f * (cap + ring * (hi - p)) * inv_area;
-          float cost = sah(p_left, p_right, n_left + planar, n_right);
-          bool planar_left = true;
-          if (planar != 0) {
-            const float cost_pr = sah(p_left, p_right, n_left, n_right + planar);
-            planar_left = cost <= cost_pr;
-            if (!planar_left) cost = cost_pr;
-          }
-          if (cost < best.cost) best = Split{k, p, planar_left, cost};
+        if (pl.inside(k, p)) {
+          const Split s = pl.at(k, p, n_left, n_right, planar);
+          if (s.cost < best.cost) best = s;
         }
         n_left += starting + planar;
       }
