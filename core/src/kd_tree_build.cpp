@@ -10,6 +10,7 @@
 #include <bitset>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <stdexcept>
 
 namespace artrace::core {
@@ -89,9 +90,16 @@ struct Split {
   float cost = kInfinity;
 };
 
+/// Nodes and leaf references built by one task. Subtrees built by tasks of their own hang off
+/// their parent's slots (`pending`) and are copied into the tree once, at the end (flatten).
 struct Subtree {
   std::vector<KdNode> nodes;
   std::vector<uint32_t> prims;
+  struct Pending {
+    uint32_t slot;  ///< the subtree's root node in `nodes`
+    std::unique_ptr<Subtree> sub;
+  };
+  std::vector<Pending> pending;
 };
 
 /// Sorts events made in triangle order by (position, type), triangles in order among equals:
@@ -290,25 +298,26 @@ class Builder {
 
  private:
   /// Makes `out.nodes[index]` an inner node splitting at `split` and builds its children with
-  /// `build_left(subtree, slot)` and `build_right`: side by side as two tasks (each into a
-  /// subtree of its own, spliced in after) for nodes of at least opt_.parallel_threshold
-  /// triangles, else in place. The layout is the same either way.
+  /// `build_left(subtree, slot)` and `build_right`: side by side as two tasks for nodes of at
+  /// least opt_.parallel_threshold triangles (each into a subtree of its own, left pending on
+  /// `out` and copied in once at the end), else in place. Which nodes take tasks depends on
+  /// their size only, so the layout is the same whatever the thread count.
   template <class Left, class Right>
   void children(Subtree& out, uint32_t index, const Split& split, uint32_t n, const Left& build_left,
                 const Right& build_right) {
     if (n >= opt_.parallel_threshold) {
-      Subtree sub_left, sub_right;
-      sub_left.nodes.resize(1);
-      sub_right.nodes.resize(1);
+      auto sub_left = std::make_unique<Subtree>(), sub_right = std::make_unique<Subtree>();
+      sub_left->nodes.resize(1);
+      sub_right->nodes.resize(1);
       tbb::task_group tasks;
-      tasks.run([&] { build_left(sub_left, 0); });
-      build_right(sub_right, 0);
+      tasks.run([&] { build_left(*sub_left, 0); });
+      build_right(*sub_right, 0);
       tasks.wait();
       const uint32_t child = static_cast<uint32_t>(out.nodes.size());
       out.nodes.resize(child + 2);
       out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
-      splice(out, child, sub_left);
-      splice(out, child + 1, sub_right);
+      out.pending.push_back({child, std::move(sub_left)});
+      out.pending.push_back({child + 1, std::move(sub_right)});
     } else {
       const uint32_t child = static_cast<uint32_t>(out.nodes.size());
       out.nodes.resize(child + 2);
@@ -758,25 +767,33 @@ class Builder {
     out.nodes[index] = KdNode::make_leaf(offset, static_cast<uint32_t>(out.prims.size()) - offset);
   }
 
-  /// Appends a subtree built on its own: its root goes to `slot`, the rest after the current end.
-  static void splice(Subtree& out, uint32_t slot, const Subtree& sub) {
-    const uint32_t base = static_cast<uint32_t>(out.nodes.size()) - 1u;  // sub index i -> base + i
-    const uint32_t prim_base = static_cast<uint32_t>(out.prims.size());
-    auto relocate = [&](KdNode n) {
-      return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + prim_base, n.prim_count())
-                         : KdNode::make_inner(n.axis(), n.split, n.left_child() + base);
-    };
-    out.nodes[slot] = relocate(sub.nodes[0]);
-    out.nodes.reserve(out.nodes.size() + sub.nodes.size() - 1);
-    for (size_t i = 1; i < sub.nodes.size(); ++i) out.nodes.push_back(relocate(sub.nodes[i]));
-    out.prims.insert(out.prims.end(), sub.prims.begin(), sub.prims.end());
-  }
-
   const std::vector<Triangle>& tris_;
   const KdTreeBuildOptions& opt_;
   const int max_depth_;
   tbb::enumerable_thread_specific<std::vector<uint8_t>> sides_;
 };
+
+/// Copies `sub` into the tree (nodes, prims): its root into node `slot`, the rest appended,
+/// then its pending subtrees the same way; each node is copied once.
+void flatten(const Subtree& sub, uint32_t slot, std::vector<KdNode>& nodes, std::vector<uint32_t>& prims) {
+  const uint32_t base = static_cast<uint32_t>(nodes.size()) - 1u;  // sub index i > 0 -> base + i
+  const uint32_t prim_base = static_cast<uint32_t>(prims.size());
+  auto relocate = [&](KdNode n) {
+    return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + prim_base, n.prim_count())
+                       : KdNode::make_inner(n.axis(), n.split, n.left_child() + base);
+  };
+  nodes[slot] = relocate(sub.nodes[0]);
+  for (size_t i = 1; i < sub.nodes.size(); ++i) nodes.push_back(relocate(sub.nodes[i]));
+  prims.insert(prims.end(), sub.prims.begin(), sub.prims.end());
+  for (const Subtree::Pending& p : sub.pending) flatten(*p.sub, base + p.slot, nodes, prims);
+}
+
+/// Adds the nodes (but its root) and references of `sub` and its pending subtrees.
+void count_nodes(const Subtree& sub, size_t& nodes, size_t& prims) {
+  nodes += sub.nodes.size() - 1;
+  prims += sub.prims.size();
+  for (const Subtree::Pending& p : sub.pending) count_nodes(*p.sub, nodes, prims);
+}
 
 bool finite(const Triangle& t) {
   return std::isfinite(t.v0.x) && std::isfinite(t.v0.y) && std::isfinite(t.v0.z) &&
@@ -826,8 +843,12 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     builder.build(tree, 0, bounds_, ev, n, 0);
   }
   view_bounds_ = padded_root_box(bounds_);
-  nodes_ = std::move(tree.nodes);
-  prim_refs_ = std::move(tree.prims);
+  size_t node_count = 1, prim_count = 0;
+  count_nodes(tree, node_count, prim_count);
+  nodes_.reserve(node_count);
+  prim_refs_.reserve(prim_count);
+  nodes_.resize(1);
+  flatten(tree, 0, nodes_, prim_refs_);
 }
 
 }  // namespace artrace::core

@@ -6,8 +6,8 @@
 // ("perfect splits"), an empty-space bonus, and leaves made where the SAH says splitting does not
 // pay. Departures: three per-axis event lists instead of one interleaved list (same O(N log N)),
 // each event one 64-bit integer key (position bits, type, triangle); the subtrees of large nodes
-// are built in parallel with oneTBB into their own arrays and spliced in a fixed order, so the
-// node array is identical whatever the thread count; nodes of at most 64 triangles (most of the
+// are built in parallel with oneTBB into their own arrays and copied into the tree once, at the
+// end, in a fixed order, so the node array is identical whatever the thread count; nodes of at most 64 triangles (most of the
 // tree) run the same steps on arrays on the stack with node-local triangle numbers, and nodes of
 // at most 6 take every bound as a candidate without events (the same splits); the initial event
 // lists are sorted by a stable radix sort (the same order). By default nodes of more than 1024
