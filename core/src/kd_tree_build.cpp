@@ -478,26 +478,33 @@ class Builder {
       if (c.clipped_right[i]) add_local_events(new_right, n_new_right, Aabb{c.right[i].lo, c.right[i].hi}, i);
     }
     Event ev_left[3][2 * kSmall], ev_right[3][2 * kSmall];
+    Event kept_left[2 * kSmall], kept_right[2 * kSmall];  // one-sided events where new ones merge in
     size_t size_left[3], size_right[3];
     for (int k = 0; k < 3; ++k) {
       std::sort(new_left[k], new_left[k] + n_new_left[k]);
       std::sort(new_right[k], new_right[k] + n_new_right[k]);
-      size_t sl = 0, sr = 0, il = 0, ir = 0;
+      // Each event is written to both sides and kept where its triangle goes: no branch on the
+      // side, which comes in no predictable order.
+      Event* to_left = n_new_left[k] != 0 ? kept_left : ev_left[k];
+      Event* to_right = n_new_right[k] != 0 ? kept_right : ev_right[k];
+      size_t sl = 0, sr = 0;
       for (size_t j = 0; j < sizes[k]; ++j) {
-        const Event& e = ev[k][j];
-        const uint32_t i = e.tri();
-        if (c.to_left[i] != kNone) {
-          const Event moved = e.renumbered(c.to_left[i]);
-          while (il < n_new_left[k] && new_left[k][il] < moved) ev_left[k][sl++] = new_left[k][il++];
-          ev_left[k][sl++] = moved;
-        } else if (c.to_right[i] != kNone) {
-          const Event moved = e.renumbered(c.to_right[i]);
-          while (ir < n_new_right[k] && new_right[k][ir] < moved) ev_right[k][sr++] = new_right[k][ir++];
-          ev_right[k][sr++] = moved;
-        }
+        const Event e = ev[k][j];
+        const uint8_t l = c.to_left[e.tri()], r = c.to_right[e.tri()];
+        to_left[sl] = e.renumbered(l);
+        sl += l != kNone;
+        to_right[sr] = e.renumbered(r);
+        sr += r != kNone;
       }
-      while (il < n_new_left[k]) ev_left[k][sl++] = new_left[k][il++];
-      while (ir < n_new_right[k]) ev_right[k][sr++] = new_right[k][ir++];
+      if (n_new_left[k] != 0) {
+        sl = static_cast<size_t>(std::merge(kept_left, kept_left + sl, new_left[k], new_left[k] + n_new_left[k], ev_left[k]) -
+                                 ev_left[k]);
+      }
+      if (n_new_right[k] != 0) {
+        sr = static_cast<size_t>(std::merge(kept_right, kept_right + sr, new_right[k],
+                                            new_right[k] + n_new_right[k], ev_right[k]) -
+                                 ev_right[k]);
+      }
       size_left[k] = sl;
       size_right[k] = sr;
     }
