@@ -5,6 +5,7 @@
 #include <glm/gtc/type_ptr.hpp>
 
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/task_group.h>
 
@@ -109,6 +110,14 @@ struct Subtree {
   };
   std::vector<Pending> pending;
 };
+
+/// Runs f(begin, end, chunk) on `chunks` equal pieces of [0, n) as parallel tasks. The pieces
+/// depend on n and `chunks` only, so results combined in chunk order do not depend on the
+/// thread count.
+template <class F>
+void for_chunks(size_t n, size_t chunks, const F& f) {
+  tbb::parallel_for(size_t{0}, chunks, [&](size_t c) { f(n * c / chunks, n * (c + 1) / chunks, c); });
+}
 
 /// Sorts events made in triangle order by (position, type), triangles in order among equals:
 /// the order of operator<, by a stable least-significant-digit radix sort (the type, then the
@@ -290,22 +299,18 @@ class Builder {
     Aabb voxel_left, voxel_right;
     child_voxels(voxel, split, voxel_left, voxel_right);
     RefList left, right;
-    left.reserve(n / 2 + n / 8);
-    right.reserve(n / 2 + n / 8);
-    const int a = split.axis;
-    for (const Ref& r : refs) {
-      bool go_left, go_right;
-      classify(coord(r.box.lo, a), coord(r.box.hi, a), split, go_left, go_right);
-      if (go_left && go_right) {
-        const Aabb bl = clipped_bounds(tris_[r.tri], voxel_left);
-        const Aabb br = clipped_bounds(tris_[r.tri], voxel_right);
-        if (!bl.empty()) left.push_back(Ref{r.tri, bl});
-        if (!br.empty()) right.push_back(Ref{r.tri, br});
-      } else if (go_left) {
-        left.push_back(r);
-      } else {
-        right.push_back(r);
-      }
+    if (n >= opt_.parallel_threshold) {
+      // The references of a large node partitioned (and straddlers clipped) in pieces side by
+      // side, joined in order.
+      const size_t chunks = kChunks;
+      std::vector<RefList> lefts(chunks), rights(chunks);
+      for_chunks(n, chunks, [&](size_t begin, size_t end, size_t c) {
+        partition_refs(refs.data() + begin, refs.data() + end, split, voxel_left, voxel_right, lefts[c], rights[c]);
+      });
+      join(lefts, left);
+      join(rights, right);
+    } else {
+      partition_refs(refs.data(), refs.data() + n, split, voxel_left, voxel_right, left, right);
     }
     RefList().swap(refs);
     children(out, index, split, n, [&](Subtree& o, uint32_t i) { build_binned(o, i, voxel_left, std::move(left), depth + 1); },
@@ -313,6 +318,41 @@ class Builder {
   }
 
  private:
+  /// Pieces a large node's work is cut into for tasks (the same for any thread count).
+  static constexpr size_t kChunks = 16;
+
+  /// Hands the references [begin, end) to the sides of `split`, in order; those straddling it
+  /// are clipped to each child's voxel.
+  void partition_refs(const Ref* begin, const Ref* end, const Split& split, const Aabb& voxel_left,
+                      const Aabb& voxel_right, RefList& left, RefList& right) const {
+    const size_t n = static_cast<size_t>(end - begin);
+    left.reserve(n / 2 + n / 8);
+    right.reserve(n / 2 + n / 8);
+    const int a = split.axis;
+    for (const Ref* r = begin; r != end; ++r) {
+      bool go_left, go_right;
+      classify(coord(r->box.lo, a), coord(r->box.hi, a), split, go_left, go_right);
+      if (go_left && go_right) {
+        const Aabb bl = clipped_bounds(tris_[r->tri], voxel_left);
+        const Aabb br = clipped_bounds(tris_[r->tri], voxel_right);
+        if (!bl.empty()) left.push_back(Ref{r->tri, bl});
+        if (!br.empty()) right.push_back(Ref{r->tri, br});
+      } else if (go_left) {
+        left.push_back(*r);
+      } else {
+        right.push_back(*r);
+      }
+    }
+  }
+
+  /// The pieces' lists, one after the other.
+  static void join(const std::vector<RefList>& pieces, RefList& out) {
+    size_t size = 0;
+    for (const RefList& p : pieces) size += p.size();
+    out.reserve(size);
+    for (const RefList& p : pieces) out.insert(out.end(), p.begin(), p.end());
+  }
+
   /// Makes `out.nodes[index]` an inner node splitting at `split` and builds its children with
   /// `build_left(subtree, slot)` and `build_right`: side by side as two tasks for nodes of at
   /// least opt_.parallel_threshold triangles (each into a subtree of its own, left pending on
@@ -366,18 +406,48 @@ class Builder {
     const int bins = static_cast<int>(std::clamp<uint32_t>(n / 2, 32, kMaxBins));
     Split best;
     const Planes pl(opt_, voxel);
-    uint32_t lower[kMaxBins], upper[kMaxBins];
+    // Counts per axis, taken in pieces side by side for large nodes and added up (integers: the
+    // same sums in any order).
+    struct Counts {
+      uint32_t lower[3][kMaxBins], upper[3][kMaxBins];
+    };
+    auto count = [&](const Ref* begin, const Ref* end, Counts& c) {
+      for (int k = 0; k < 3; ++k) {
+        std::fill(c.lower[k], c.lower[k] + bins, 0u);
+        std::fill(c.upper[k], c.upper[k] + bins, 0u);
+        if (!pl.usable(k)) continue;
+        const float lo = pl.lo(k);
+        const float scale = static_cast<float>(bins) / (pl.hi(k) - lo);
+        auto bin = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bins - 1); };
+        for (const Ref* r = begin; r != end; ++r) {
+          ++c.lower[k][bin(coord(r->box.lo, k))];
+          ++c.upper[k][bin(coord(r->box.hi, k))];
+        }
+      }
+    };
+    auto counts = std::make_unique<Counts>();
+    if (n >= opt_.parallel_threshold) {
+      std::vector<Counts> pieces(kChunks);
+      for_chunks(n, kChunks, [&](size_t begin, size_t end, size_t c) {
+        count(refs.data() + begin, refs.data() + end, pieces[c]);
+      });
+      *counts = pieces[0];
+      for (size_t c = 1; c < kChunks; ++c) {
+        for (int k = 0; k < 3; ++k) {
+          for (int j = 0; j < bins; ++j) {
+            counts->lower[k][j] += pieces[c].lower[k][j];
+            counts->upper[k][j] += pieces[c].upper[k][j];
+          }
+        }
+      }
+    } else {
+      count(refs.data(), refs.data() + n, *counts);
+    }
     for (int k = 0; k < 3; ++k) {
       if (!pl.usable(k)) continue;
       const float lo = pl.lo(k), hi = pl.hi(k);
-      const float scale = static_cast<float>(bins) / (hi - lo);
-      auto bin = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bins - 1); };
-      std::fill(lower, lower + bins, 0u);
-      std::fill(upper, upper + bins, 0u);
-      for (const Ref& r : refs) {
-        ++lower[bin(coord(r.box.lo, k))];
-        ++upper[bin(coord(r.box.hi, k))];
-      }
+      const uint32_t* lower = counts->lower[k];
+      const uint32_t* upper = counts->upper[k];
       const float width = (hi - lo) / static_cast<float>(bins);
       uint32_t n_left = 0, n_right = n;
       for (int j = 1; j < bins; ++j) {
@@ -796,26 +866,42 @@ class Builder {
   tbb::enumerable_thread_specific<std::vector<uint8_t>> sides_;
 };
 
-/// Copies `sub` into the tree (nodes, prims): its root into node `slot`, the rest appended,
-/// then its pending subtrees the same way; each node is copied once.
-void flatten(const Subtree& sub, uint32_t slot, std::vector<KdNode>& nodes, std::vector<uint32_t>& prims) {
-  const uint32_t base = static_cast<uint32_t>(nodes.size()) - 1u;  // sub index i > 0 -> base + i
-  const uint32_t prim_base = static_cast<uint32_t>(prims.size());
-  auto relocate = [&](KdNode n) {
-    return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + prim_base, n.prim_count())
-                       : KdNode::make_inner(n.axis(), n.split, n.left_child() + base);
-  };
-  nodes[slot] = relocate(sub.nodes[0]);
-  for (size_t i = 1; i < sub.nodes.size(); ++i) nodes.push_back(relocate(sub.nodes[i]));
-  prims.insert(prims.end(), sub.prims.begin(), sub.prims.end());
-  for (const Subtree::Pending& p : sub.pending) flatten(*p.sub, base + p.slot, nodes, prims);
+/// Where flatten() puts a subtree: its root into node `slot`, its other nodes from `base + 1`,
+/// its references from `prim_base`.
+struct Placement {
+  const Subtree* sub;
+  uint32_t slot, base, prim_base;
+};
+
+/// Places `sub` after the nodes and references placed so far (ends `node_end`, `prim_end`),
+/// then its pending subtrees the same way, depth first.
+void place(const Subtree& sub, uint32_t slot, uint32_t& node_end, uint32_t& prim_end, std::vector<Placement>& out) {
+  const uint32_t base = node_end - 1u;  // sub index i > 0 -> base + i
+  out.push_back({&sub, slot, base, prim_end});
+  node_end += static_cast<uint32_t>(sub.nodes.size()) - 1u;
+  prim_end += static_cast<uint32_t>(sub.prims.size());
+  for (const Subtree::Pending& p : sub.pending) place(*p.sub, base + p.slot, node_end, prim_end, out);
 }
 
-/// Adds the nodes (but its root) and references of `sub` and its pending subtrees.
-void count_nodes(const Subtree& sub, size_t& nodes, size_t& prims) {
-  nodes += sub.nodes.size() - 1;
-  prims += sub.prims.size();
-  for (const Subtree::Pending& p : sub.pending) count_nodes(*p.sub, nodes, prims);
+/// Copies the tree of subtrees into one node array and one reference array, each node once,
+/// the subtrees side by side.
+void flatten(const Subtree& root, std::vector<KdNode>& nodes, std::vector<uint32_t>& prims) {
+  std::vector<Placement> placements;
+  uint32_t node_end = 1, prim_end = 0;
+  place(root, 0, node_end, prim_end, placements);
+  nodes.resize(node_end);
+  prims.resize(prim_end);
+  auto relocate = [](const Placement& pl, KdNode n) {
+    return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + pl.prim_base, n.prim_count())
+                       : KdNode::make_inner(n.axis(), n.split, n.left_child() + pl.base);
+  };
+  tbb::parallel_for(size_t{0}, placements.size(), [&](size_t i) {
+    const Placement& pl = placements[i];
+    for (size_t j = 1; j < pl.sub->nodes.size(); ++j) nodes[pl.base + j] = relocate(pl, pl.sub->nodes[j]);
+    std::copy(pl.sub->prims.begin(), pl.sub->prims.end(), prims.begin() + pl.prim_base);
+  });
+  // The roots last: a subtree's slot is a placeholder among its parent's nodes.
+  for (const Placement& pl : placements) nodes[pl.slot] = relocate(pl, pl.sub->nodes[0]);
 }
 
 bool finite(const Triangle& t) {
@@ -832,8 +918,13 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
 
   // Triangles with non-finite coordinates can never be hit (the watertight test rejects them);
   // they are left out, so that the splits see only ordered positions.
+  constexpr size_t kPieces = 16;
+  std::vector<uint32_t> piece_finite(kPieces, 0);
+  for_chunks(count, kPieces, [&](size_t begin, size_t end, size_t c) {
+    for (size_t i = begin; i < end; ++i) piece_finite[c] += finite(tris_[i]) ? 1u : 0u;
+  });
   uint32_t n = 0;
-  for (uint32_t i = 0; i < count; ++i) n += finite(tris_[i]) ? 1u : 0u;
+  for (const uint32_t f : piece_finite) n += f;
   int max_depth = opt.max_depth;
   if (max_depth <= 0) {
     max_depth = static_cast<int>(6.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
@@ -846,11 +937,23 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     tree.nodes[0] = KdNode::make_leaf(0, 0);
   } else if (opt.binned_above > 0 && n > opt.binned_above) {
     std::vector<Builder::Ref> refs;
-    refs.reserve(n);
-    for (uint32_t i = 0; i < count; ++i) {
-      if (!finite(tris_[i])) continue;
-      refs.push_back(Builder::Ref{i, Aabb::of(tris_[i])});
-      bounds_.extend(refs.back().box);
+    if (n == count) {  // all finite, the common case: boxes and bounds side by side
+      refs.resize(n);
+      std::vector<Aabb> piece_bounds(kPieces);
+      for_chunks(count, kPieces, [&](size_t begin, size_t end, size_t c) {
+        for (size_t i = begin; i < end; ++i) {
+          refs[i] = Builder::Ref{static_cast<uint32_t>(i), Aabb::of(tris_[i])};
+          piece_bounds[c].extend(refs[i].box);
+        }
+      });
+      for (const Aabb& b : piece_bounds) bounds_.extend(b);  // min and max: the same in any order
+    } else {
+      refs.reserve(n);
+      for (uint32_t i = 0; i < count; ++i) {
+        if (!finite(tris_[i])) continue;
+        refs.push_back(Builder::Ref{i, Aabb::of(tris_[i])});
+        bounds_.extend(refs.back().box);
+      }
     }
     builder.build_binned(tree, 0, bounds_, std::move(refs), 0);
   } else {
@@ -866,12 +969,7 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     builder.build(tree, 0, bounds_, ev, n, 0);
   }
   view_bounds_ = padded_root_box(bounds_);
-  size_t node_count = 1, prim_count = 0;
-  count_nodes(tree, node_count, prim_count);
-  nodes_.reserve(node_count);
-  prim_refs_.reserve(prim_count);
-  nodes_.resize(1);
-  flatten(tree, 0, nodes_, prim_refs_);
+  flatten(tree, nodes_, prim_refs_);
 }
 
 }  // namespace artrace::core
