@@ -757,9 +757,10 @@ class Builder {
       // One pass. The events at a position are counted by type in one packed word (21 bits a
       // type: no branch on the type, which comes in no predictable order); the cost is taken once
       // all events at a position are counted.
+      static constexpr uint64_t kCount[4] = {uint64_t{1}, uint64_t{1} << 21, uint64_t{1} << 42, 0};
       uint64_t counts = 0;
       for (size_t i = 0; i < size; ++i) {
-        counts += uint64_t{1} << (21u * list[i].type());
+        counts += kCount[list[i].type()];
         const uint32_t bits = list[i].pos_bits();
         if (i + 1 < size && list[i + 1].pos_bits() == bits) continue;
         const float p = from_ordered_bits(bits);
