@@ -755,8 +755,8 @@ class Builder {
       const Event* list = lists[k];
       const size_t size = sizes[k];
       // One pass. The events at a position are counted by type in one packed word (21 bits a
-      // type: no branch on the type, which comes in no predictable order); the cost is taken once
-      // all events at a position are counted.
+      // type, the increment looked up by type: no branch on the type, which comes in no
+      // predictable order); the cost is taken once all events at a position are counted.
       static constexpr uint64_t kCount[4] = {uint64_t{1}, uint64_t{1} << 21, uint64_t{1} << 42, 0};
       uint64_t counts = 0;
       for (size_t i = 0; i < size; ++i) {
