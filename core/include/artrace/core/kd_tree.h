@@ -7,10 +7,11 @@
 // pay. Departures: three per-axis event lists instead of one interleaved list (same O(N log N)),
 // each event one 64-bit integer key (position bits, type, triangle); the subtrees of large nodes
 // are built in parallel with oneTBB into their own arrays and copied into the tree once, at the
-// end, in a fixed order, so the node array is identical whatever the thread count; nodes of at most 64 triangles (most of the
-// tree) run the same steps on arrays on the stack with node-local triangle numbers, and nodes of
-// at most 6 take every bound as a candidate without events (the same splits); the initial event
-// lists are sorted by a stable radix sort (the same order). By default nodes of more than 1024
+// end, in a fixed order, so the node array is identical whatever the thread count (the top
+// levels' binning and partitioning, too, run in fixed pieces side by side); nodes of at most 128
+// triangles (most of the tree) run the same steps on arrays on the stack with node-local triangle
+// numbers, and nodes of at most 6 take every bound as a candidate without events (the same
+// splits); event lists are sorted by a stable radix sort (the same order). By default nodes of more than 1024
 // triangles choose their split from binned counts instead (KdTreeBuildOptions::binned_above:
 // O(n) a node, no events; 0 restores the sweep everywhere), which on the BART kitchen gives a
 // lower SAH cost and a faster build; the sweep still makes every node below.
