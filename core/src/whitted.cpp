@@ -251,6 +251,7 @@ class WaveTracer {
   /// Traces `gen` and every generation it spawns; adds radiance to color[lane].
   void run(std::vector<Pending>& gen, std::vector<Pending>& next, glm::vec3* color) {
     while (!gen.empty()) {
+      if (gen[0].depth > 0) by_direction(gen, next);
       next.clear();
       for (size_t first = 0; first < gen.size(); first += kPacketSize) {
         const int n = static_cast<int>(std::min<size_t>(kPacketSize, gen.size() - first));
@@ -261,6 +262,25 @@ class WaveTracer {
   }
 
  private:
+  /// Reorders a generation of reflection and refraction rays by dominant axis and direction
+  /// octant (stable: a counting sort), so that a packet's lanes share them: the packet kernels
+  /// trace the lanes of each (axis, octant) group separately. `scratch` is reused.
+  static void by_direction(std::vector<Pending>& gen, std::vector<Pending>& scratch) {
+    constexpr int kKeys = 24;
+    auto key = [](const glm::vec3& d) {
+      int kz = 0;
+      if (std::fabs(d.y) > std::fabs(d.x)) kz = 1;
+      if (std::fabs(d.z) > std::fabs(kz == 0 ? d.x : d.y)) kz = 2;
+      return kz * 8 + (std::signbit(d.x) ? 1 : 0) + (std::signbit(d.y) ? 2 : 0) + (std::signbit(d.z) ? 4 : 0);
+    };
+    int start[kKeys + 1] = {};
+    for (const Pending& r : gen) ++start[key(r.ray.dir) + 1];
+    for (int k = 0; k < kKeys; ++k) start[k + 1] += start[k];
+    scratch.resize(gen.size());
+    for (const Pending& r : gen) scratch[static_cast<size_t>(start[key(r.ray.dir)]++)] = r;
+    gen.swap(scratch);
+  }
+
   const Material& material(const Hit& h) const {
     const uint32_t id = s_.surfaces->material(h);
     if (id >= s_.materials.size()) throw std::out_of_range("material index out of range");
