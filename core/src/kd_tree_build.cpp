@@ -21,14 +21,14 @@ namespace {
 
 enum EventType : uint32_t { kEnd = 0, kPlanar = 1, kStart = 2 };
 
-/// Float bits mapped to unsigned integers in the same order (finite values; -0.0 is made +0.0
-/// first, so that equal positions have equal bits).
 /// v[i] through glm's pointer to the three coordinates instead of its operator[], a switch on i
 /// (a branch an access, in loops over all triangles): 6% of the build's instructions.
 inline float coord(const glm::vec3& v, int i) { return glm::value_ptr(v)[i]; }
 
 inline void set_coord(glm::vec3& v, int i, float x) { glm::value_ptr(v)[i] = x; }
 
+/// Float bits mapped to unsigned integers in the same order (finite values; -0.0 is made +0.0
+/// first, so that equal positions have equal bits).
 inline uint32_t ordered_bits(float f) {
   f += 0.0f;
   uint32_t u;

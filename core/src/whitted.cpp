@@ -126,6 +126,13 @@ inline uint64_t ticks() {
 #endif
 }
 
+/// Ticks since t0 (0 should the counter ever step back, as an unsynchronised one could between
+/// cores).
+inline uint64_t ticks_since(uint64_t t0) {
+  const uint64_t now = ticks();
+  return now > t0 ? now - t0 : 0;
+}
+
 struct Counters {
   uint64_t primary = 0, shadow = 0, secondary = 0, transmission = 0;
   uint64_t primary_ticks = 0, shadow_ticks = 0, secondary_ticks = 0, total_ticks = 0;
@@ -302,7 +309,7 @@ class WaveTracer {
         hp.t[i] = h.t, hp.u[i] = h.u, hp.v[i] = h.v, hp.prim[i] = h.prim, hp.inst[i] = h.inst;
       }
     }
-    (primary ? c_.primary_ticks : c_.secondary_ticks) += ticks() - t0;
+    (primary ? c_.primary_ticks : c_.secondary_ticks) += ticks_since(t0);
     (primary ? c_.primary : c_.secondary) += static_cast<uint64_t>(n);
 
     Point pt[kPacketSize];
@@ -355,7 +362,7 @@ class WaveTracer {
         LightLanes& ll = light_lanes_[li];
         if (ll.lit) shadow_packet(ll.shadow, ll.lit, ll.trans, hints_[li]);
       }
-      c_.shadow_ticks += ticks() - s0;
+      c_.shadow_ticks += ticks_since(s0);
     }
     for (size_t li = 0; li < light_count; ++li) {
       const LightLanes& ll = light_lanes_[li];
@@ -576,12 +583,12 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) img.at(x, y) = color[(y - t.y0) * kTileSize + (x - t.x0)];
     }
-    c.total_ticks += ticks() - t0;
+    c.total_ticks += ticks_since(t0);
   });
   if (stats) {
     WhittedStats s;
     s.wall_ms = ms(start, Clock::now());
-    const uint64_t frame_ticks = ticks() - start_ticks;
+    const uint64_t frame_ticks = ticks_since(start_ticks);
     const double ms_per_tick = frame_ticks > 0 ? s.wall_ms / static_cast<double>(frame_ticks) : 0.0;
     for (const Counters& c : counters) {
       s.primary_rays += c.primary;
@@ -591,7 +598,8 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
       s.primary_ms += ms_per_tick * static_cast<double>(c.primary_ticks);
       s.shadow_ms += ms_per_tick * static_cast<double>(c.shadow_ticks);
       s.secondary_ms += ms_per_tick * static_cast<double>(c.secondary_ticks);
-      s.shade_ms += ms_per_tick * static_cast<double>(c.total_ticks - c.primary_ticks - c.shadow_ticks - c.secondary_ticks);
+      s.shade_ms += ms_per_tick * (static_cast<double>(c.total_ticks) - static_cast<double>(c.primary_ticks) -
+                                   static_cast<double>(c.shadow_ticks) - static_cast<double>(c.secondary_ticks));
     }
     *stats = s;
   }
