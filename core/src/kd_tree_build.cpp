@@ -281,6 +281,22 @@ class Builder {
   };
   using RefList = std::vector<Ref>;
 
+  /// build() from references in triangle order: their events, sorted.
+  void build_swept(Subtree& out, uint32_t index, const Aabb& voxel, RefList refs, int depth) {
+    const uint32_t n = static_cast<uint32_t>(refs.size());
+    EventList ev[3];
+    for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
+    for (const Ref& r : refs) add_events(ev, r.box, r.tri);
+    RefList().swap(refs);
+    // Radix sorts keep triangle order among equal keys: the order of operator<.
+    if (n >= opt_.parallel_threshold) {
+      tbb::parallel_invoke([&] { radix_sort<11>(ev[0]); }, [&] { radix_sort<11>(ev[1]); }, [&] { radix_sort<11>(ev[2]); });
+    } else {
+      for (auto& list : ev) radix_sort<8>(list);
+    }
+    build(out, index, voxel, ev, n, depth);
+  }
+
   /// build() for nodes of more than opt_.binned_above triangles: the split from binned counts,
   /// the triangles handed down as references with clipped boxes. Smaller nodes, and nodes where
   /// no binned split pays, continue with sorted events and the exact sweep.
@@ -288,38 +304,27 @@ class Builder {
     const uint32_t n = static_cast<uint32_t>(refs.size());
     const Split split = n > opt_.binned_above ? binned_split(voxel, refs) : Split{};
     if (n <= opt_.binned_above || is_leaf(split, n, depth)) {
-      EventList ev[3];
-      for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
-      for (const Ref& r : refs) add_events(ev, r.box, r.tri);
-      RefList().swap(refs);
-      for (auto& list : ev) radix_sort<8>(list);  // the references are in triangle order
-      build(out, index, voxel, ev, n, depth);
+      build_swept(out, index, voxel, std::move(refs), depth);
       return;
     }
     Aabb voxel_left, voxel_right;
     child_voxels(voxel, split, voxel_left, voxel_right);
-    RefList left, right;
-    if (n >= opt_.parallel_threshold) {
-      // The references of a large node partitioned (and straddlers clipped) in pieces side by
-      // side, joined in order.
-      const size_t chunks = kChunks;
-      std::vector<RefList> lefts(chunks), rights(chunks);
-      for_chunks(n, chunks, [&](size_t begin, size_t end, size_t c) {
-        partition_refs(refs.data() + begin, refs.data() + end, split, voxel_left, voxel_right, lefts[c], rights[c]);
-      });
-      join(lefts, left);
-      join(rights, right);
-    } else {
-      partition_refs(refs.data(), refs.data() + n, split, voxel_left, voxel_right, left, right);
-    }
+    // The references partitioned (and straddlers clipped) in pieces side by side, joined in order.
+    const size_t pieces = this->pieces(n);
+    std::vector<RefList> lefts(pieces), rights(pieces);
+    for_chunks(n, pieces, [&](size_t begin, size_t end, size_t c) {
+      partition_refs(refs.data() + begin, refs.data() + end, split, voxel_left, voxel_right, lefts[c], rights[c]);
+    });
     RefList().swap(refs);
+    RefList left = join(lefts), right = join(rights);
     children(out, index, split, n, [&](Subtree& o, uint32_t i) { build_binned(o, i, voxel_left, std::move(left), depth + 1); },
              [&](Subtree& o, uint32_t i) { build_binned(o, i, voxel_right, std::move(right), depth + 1); });
   }
 
  private:
-  /// Pieces a large node's work is cut into for tasks (the same for any thread count).
-  static constexpr size_t kChunks = 16;
+  /// Pieces a node's binning and partition are cut into for tasks: 16 for nodes of at least
+  /// opt_.parallel_threshold triangles, else one (the same for any thread count).
+  size_t pieces(uint32_t n) const { return n >= opt_.parallel_threshold ? 16 : 1; }
 
   /// Hands the references [begin, end) to the sides of `split`, in order; those straddling it
   /// are clipped to each child's voxel.
@@ -346,11 +351,14 @@ class Builder {
   }
 
   /// The pieces' lists, one after the other.
-  static void join(const std::vector<RefList>& pieces, RefList& out) {
+  static RefList join(std::vector<RefList>& pieces) {
+    if (pieces.size() == 1) return std::move(pieces[0]);
     size_t size = 0;
     for (const RefList& p : pieces) size += p.size();
+    RefList out;
     out.reserve(size);
     for (const RefList& p : pieces) out.insert(out.end(), p.begin(), p.end());
+    return out;
   }
 
   /// Makes `out.nodes[index]` an inner node splitting at `split` and builds its children with
@@ -369,18 +377,23 @@ class Builder {
       tasks.run([&] { build_left(*sub_left, 0); });
       build_right(*sub_right, 0);
       tasks.wait();
-      const uint32_t child = static_cast<uint32_t>(out.nodes.size());
-      out.nodes.resize(child + 2);
-      out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+      const uint32_t child = add_inner(out, index, split);
       out.pending.push_back({child, std::move(sub_left)});
       out.pending.push_back({child + 1, std::move(sub_right)});
     } else {
-      const uint32_t child = static_cast<uint32_t>(out.nodes.size());
-      out.nodes.resize(child + 2);
-      out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+      const uint32_t child = add_inner(out, index, split);
       build_left(out, child);
       build_right(out, child + 1);
     }
+  }
+
+  /// Makes `out.nodes[index]` an inner node splitting at `split`; returns the slot of its first
+  /// child (the two children's slots are appended, adjacent).
+  static uint32_t add_inner(Subtree& out, uint32_t index, const Split& split) {
+    const uint32_t child = static_cast<uint32_t>(out.nodes.size());
+    out.nodes.resize(child + 2);
+    out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+    return child;
   }
 
   /// The sides of a triangle whose clipped extent on the split axis is [lo, hi]: one side if it
@@ -425,29 +438,23 @@ class Builder {
         }
       }
     };
-    auto counts = std::make_unique<Counts>();
-    if (n >= opt_.parallel_threshold) {
-      std::vector<Counts> pieces(kChunks);
-      for_chunks(n, kChunks, [&](size_t begin, size_t end, size_t c) {
-        count(refs.data() + begin, refs.data() + end, pieces[c]);
-      });
-      *counts = pieces[0];
-      for (size_t c = 1; c < kChunks; ++c) {
-        for (int k = 0; k < 3; ++k) {
-          for (int j = 0; j < bins; ++j) {
-            counts->lower[k][j] += pieces[c].lower[k][j];
-            counts->upper[k][j] += pieces[c].upper[k][j];
-          }
+    std::vector<Counts> counts(pieces(n));
+    for_chunks(n, counts.size(), [&](size_t begin, size_t end, size_t c) {
+      count(refs.data() + begin, refs.data() + end, counts[c]);
+    });
+    for (size_t c = 1; c < counts.size(); ++c) {
+      for (int k = 0; k < 3; ++k) {
+        for (int j = 0; j < bins; ++j) {
+          counts[0].lower[k][j] += counts[c].lower[k][j];
+          counts[0].upper[k][j] += counts[c].upper[k][j];
         }
       }
-    } else {
-      count(refs.data(), refs.data() + n, *counts);
     }
     for (int k = 0; k < 3; ++k) {
       if (!pl.usable(k)) continue;
       const float lo = pl.lo(k), hi = pl.hi(k);
-      const uint32_t* lower = counts->lower[k];
-      const uint32_t* upper = counts->upper[k];
+      const uint32_t* lower = counts[0].lower[k];
+      const uint32_t* upper = counts[0].upper[k];
       const float width = (hi - lo) / static_cast<float>(bins);
       uint32_t n_left = 0, n_right = n;
       for (int j = 1; j < bins; ++j) {
@@ -521,20 +528,12 @@ class Builder {
   void build_small(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n,
                    const Event* const ev[3], const size_t sizes[3], int depth) {
     const Split split = may_split(n, depth) ? find_split(voxel, ev, sizes, n) : Split{};
-    if (is_leaf(split, n, depth)) {
-      make_leaf(out, index, items, n);
-      return;
-    }
-    Aabb voxel_left, voxel_right;
-    child_voxels(voxel, split, voxel_left, voxel_right);
     Children c;
-    partition(items, n, split, voxel_left, voxel_right, c);
-    const uint32_t child = static_cast<uint32_t>(out.nodes.size());
-    out.nodes.resize(child + 2);
-    out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
+    uint32_t child;
+    if (!split_items(out, index, voxel, split, items, n, depth, c, child)) return;
     if (c.n_left <= kTiny && c.n_right <= kTiny) {  // no events needed below
-      build_tiny(out, child, voxel_left, c.left, c.n_left, depth + 1);
-      build_tiny(out, child + 1, voxel_right, c.right, c.n_right, depth + 1);
+      build_tiny(out, child, c.voxel_left, c.left, c.n_left, depth + 1);
+      build_tiny(out, child + 1, c.voxel_right, c.right, c.n_right, depth + 1);
       return;
     }
     Event ev_left[3][2 * kSmall], ev_right[3][2 * kSmall];
@@ -542,9 +541,10 @@ class Builder {
     child_events(c, ev, sizes, ev_left, size_left, ev_right, size_right);
     const Event* lists_left[3] = {ev_left[0], ev_left[1], ev_left[2]};
     const Event* lists_right[3] = {ev_right[0], ev_right[1], ev_right[2]};
-    build_small(out, child, voxel_left, c.left, c.n_left, lists_left, size_left, depth + 1);
-    build_small(out, child + 1, voxel_right, c.right, c.n_right, lists_right, size_right, depth + 1);
+    build_small(out, child, c.voxel_left, c.left, c.n_left, lists_left, size_left, depth + 1);
+    build_small(out, child + 1, c.voxel_right, c.right, c.n_right, lists_right, size_right, depth + 1);
   }
+
 
   /// Nodes of at most this many triangles find their split without events: every bound of every
   /// triangle is a candidate, its counts taken over all the triangles (O(n^2), on arrays of
@@ -555,19 +555,11 @@ class Builder {
   /// build_small() for a node of at most kTiny triangles, without events.
   void build_tiny(Subtree& out, uint32_t index, const Aabb& voxel, const Item* items, uint32_t n, int depth) {
     const Split split = may_split(n, depth) ? tiny_split(voxel, items, n) : Split{};
-    if (is_leaf(split, n, depth)) {
-      make_leaf(out, index, items, n);
-      return;
-    }
-    Aabb voxel_left, voxel_right;
-    child_voxels(voxel, split, voxel_left, voxel_right);
     Children c;
-    partition(items, n, split, voxel_left, voxel_right, c);
-    const uint32_t child = static_cast<uint32_t>(out.nodes.size());
-    out.nodes.resize(child + 2);
-    out.nodes[index] = KdNode::make_inner(split.axis, split.pos, child);
-    build_tiny(out, child, voxel_left, c.left, c.n_left, depth + 1);
-    build_tiny(out, child + 1, voxel_right, c.right, c.n_right, depth + 1);
+    uint32_t child;
+    if (!split_items(out, index, voxel, split, items, n, depth, c, child)) return;
+    build_tiny(out, child, c.voxel_left, c.left, c.n_left, depth + 1);
+    build_tiny(out, child + 1, c.voxel_right, c.right, c.n_right, depth + 1);
   }
 
   /// find_split() for at most kTiny items, from their boxes. The sweep visits positions in
@@ -602,13 +594,30 @@ class Builder {
 
   static constexpr uint8_t kNone = 0xff;
 
-  /// A small node's triangles split between its children.
+  /// A small node's triangles split between its children (and the children's voxels).
+  static_assert(kSmall < kNone, "node-local numbers are bytes, kNone excluded");
+
   struct Children {
+    Aabb voxel_left, voxel_right;
     Item left[kSmall], right[kSmall];
     uint32_t n_left = 0, n_right = 0;
     uint8_t to_left[kSmall], to_right[kSmall];  ///< one-sided items: their number in the child, else kNone
     std::bitset<kSmall> clipped_left, clipped_right;  ///< the children's items made by clipping
   };
+
+  /// What build_small() and build_tiny() share: a leaf where `split` does not pay (false), else
+  /// the inner node at `index`, the slot of its first child and the children's voxels and items.
+  bool split_items(Subtree& out, uint32_t index, const Aabb& voxel, const Split& split, const Item* items, uint32_t n,
+                   int depth, Children& c, uint32_t& child) const {
+    if (is_leaf(split, n, depth)) {
+      make_leaf(out, index, items, n);
+      return false;
+    }
+    child_voxels(voxel, split, c.voxel_left, c.voxel_right);
+    partition(items, n, split, c);
+    child = add_inner(out, index, split);
+    return true;
+  }
 
   /// The children's event lists of a small node: one-sided triangles keep their events under
   /// their new local number; clipped ones get new events, sorted on their own and merged in.
@@ -657,8 +666,9 @@ class Builder {
 
   /// Classification (distribute's rules, read off the boxes): one-sided triangles are copied,
   /// straddlers clipped to each side.
-  void partition(const Item* items, uint32_t n, const Split& split, const Aabb& voxel_left, const Aabb& voxel_right,
-                 Children& c) const {
+  void partition(const Item* items, uint32_t n, const Split& split, Children& c) const {
+    const Aabb& voxel_left = c.voxel_left;
+    const Aabb& voxel_right = c.voxel_right;
     const int a = split.axis;
     for (uint32_t i = 0; i < n; ++i) {
       const Item& it = items[i];
@@ -938,43 +948,35 @@ KdTree::KdTree(std::vector<Triangle> tris, const KdTreeBuildOptions& opt) : tris
     max_depth = static_cast<int>(6.0 + 1.3 * std::log2(std::max<double>(1.0, n)));
   }
   max_depth = std::min(max_depth, 60);
+  // The finite triangles' boxes, in triangle order, and their bounds.
+  std::vector<Builder::Ref> refs;
+  if (n == count) {  // the common case: side by side
+    refs.resize(n);
+    std::vector<Aabb> piece_bounds(kPieces);
+    for_chunks(count, kPieces, [&](size_t begin, size_t end, size_t c) {
+      for (size_t i = begin; i < end; ++i) {
+        refs[i] = Builder::Ref{static_cast<uint32_t>(i), Aabb::of(tris_[i])};
+        piece_bounds[c].extend(refs[i].box);
+      }
+    });
+    for (const Aabb& b : piece_bounds) bounds_.extend(b);  // min and max: the same in any order
+  } else {
+    refs.reserve(n);
+    for (uint32_t i = 0; i < count; ++i) {
+      if (!finite(tris_[i])) continue;
+      refs.push_back(Builder::Ref{i, Aabb::of(tris_[i])});
+      bounds_.extend(refs.back().box);
+    }
+  }
   Builder builder(tris_, opt, max_depth);
   Subtree tree;
   tree.nodes.resize(1);
   if (n == 0) {
     tree.nodes[0] = KdNode::make_leaf(0, 0);
   } else if (opt.binned_above > 0 && n > opt.binned_above) {
-    std::vector<Builder::Ref> refs;
-    if (n == count) {  // all finite, the common case: boxes and bounds side by side
-      refs.resize(n);
-      std::vector<Aabb> piece_bounds(kPieces);
-      for_chunks(count, kPieces, [&](size_t begin, size_t end, size_t c) {
-        for (size_t i = begin; i < end; ++i) {
-          refs[i] = Builder::Ref{static_cast<uint32_t>(i), Aabb::of(tris_[i])};
-          piece_bounds[c].extend(refs[i].box);
-        }
-      });
-      for (const Aabb& b : piece_bounds) bounds_.extend(b);  // min and max: the same in any order
-    } else {
-      refs.reserve(n);
-      for (uint32_t i = 0; i < count; ++i) {
-        if (!finite(tris_[i])) continue;
-        refs.push_back(Builder::Ref{i, Aabb::of(tris_[i])});
-        bounds_.extend(refs.back().box);
-      }
-    }
     builder.build_binned(tree, 0, bounds_, std::move(refs), 0);
   } else {
-    EventList ev[3];
-    for (auto& list : ev) list.reserve(2 * static_cast<size_t>(n));
-    for (uint32_t i = 0; i < count; ++i) {
-      if (!finite(tris_[i])) continue;
-      const Aabb box = Aabb::of(tris_[i]);
-      bounds_.extend(box);
-      add_events(ev, box, i);
-    }
-    tbb::parallel_invoke([&] { radix_sort<11>(ev[0]); }, [&] { radix_sort<11>(ev[1]); }, [&] { radix_sort<11>(ev[2]); });
-    builder.build(tree, 0, bounds_, ev, n, 0);
+    builder.build_swept(tree, 0, bounds_, std::move(refs), 0);
   }
   view_bounds_ = padded_root_box(bounds_);
   flatten(tree, nodes_, prim_refs_);

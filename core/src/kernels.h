@@ -5,7 +5,28 @@
 #include "artrace/core/kd_tree.h"
 #include "artrace/core/two_level_scene.h"
 
+#include <cmath>
+
 namespace artrace::core {
+
+/// The axis of a direction's largest component (the first of equal ones), and the group the
+/// packet kernels trace a lane with: that axis and the direction's octant, 24 keys. The kernels
+/// trace each group of a packet's lanes separately, so callers that can choose their packets
+/// (the renderer's secondary rays) group by the same key. `static`: each kernel translation
+/// unit, compiled with its own instruction set, keeps its own copy.
+static inline int dominant_axis(float dx, float dy, float dz) {
+  int kz = 0;
+  if (std::fabs(dy) > std::fabs(dx)) kz = 1;
+  if (std::fabs(dz) > std::fabs(kz == 0 ? dx : dy)) kz = 2;
+  return kz;
+}
+
+constexpr int kDirectionKeys = 24;
+
+static inline int direction_key(float dx, float dy, float dz) {
+  return dominant_axis(dx, dy, dz) * 8 + (std::signbit(dx) ? 1 : 0) + (std::signbit(dy) ? 2 : 0) +
+         (std::signbit(dz) ? 4 : 0);
+}
 
 /// The root box the kd-tree kernels clip rays to: the tree's bounds widened by a relative margin,
 /// so that rounding in the slab test never loses a ray that grazes the scene's outer faces.

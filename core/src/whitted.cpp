@@ -1,4 +1,5 @@
 #include "artrace/core/whitted.h"
+#include "kernels.h"
 
 #include <tbb/enumerable_thread_specific.h>
 
@@ -269,20 +270,14 @@ class WaveTracer {
   }
 
  private:
-  /// Reorders a generation of reflection and refraction rays by dominant axis and direction
-  /// octant (stable: a counting sort), so that a packet's lanes share them: the packet kernels
-  /// trace the lanes of each (axis, octant) group separately. `scratch` is reused.
+  /// Reorders a generation of reflection and refraction rays by the kernels' direction key
+  /// (dominant axis and octant; stable: a counting sort), so that a packet's lanes share it: the
+  /// packet kernels trace each key's lanes separately. `scratch` is reused.
   static void by_direction(std::vector<Pending>& gen, std::vector<Pending>& scratch) {
-    constexpr int kKeys = 24;
-    auto key = [](const glm::vec3& d) {
-      int kz = 0;
-      if (std::fabs(d.y) > std::fabs(d.x)) kz = 1;
-      if (std::fabs(d.z) > std::fabs(kz == 0 ? d.x : d.y)) kz = 2;
-      return kz * 8 + (std::signbit(d.x) ? 1 : 0) + (std::signbit(d.y) ? 2 : 0) + (std::signbit(d.z) ? 4 : 0);
-    };
-    int start[kKeys + 1] = {};
+    auto key = [](const glm::vec3& d) { return direction_key(d.x, d.y, d.z); };
+    int start[kDirectionKeys + 1] = {};
     for (const Pending& r : gen) ++start[key(r.ray.dir) + 1];
-    for (int k = 0; k < kKeys; ++k) start[k + 1] += start[k];
+    for (int k = 0; k < kDirectionKeys; ++k) start[k + 1] += start[k];
     scratch.resize(gen.size());
     for (const Pending& r : gen) scratch[static_cast<size_t>(start[key(r.ray.dir)]++)] = r;
     gen.swap(scratch);
