@@ -65,9 +65,14 @@ void OniReader::open() {
   check(impl->color.create(impl->device, openni::SENSOR_COLOR), "no colour stream");
   openni::PlaybackControl* pc = impl->device.getPlaybackControl();
   if (!pc) throw ParseError(path_.string(), 0, 0, "not a playback device");
-  // Manual mode (one frame per waitForAnyStream) and no repeat, set before the streams start.
+  // Manual mode (one frame per waitForAnyStream), set before the streams start. Repeat is on
+  // although next() stops at the last frame: without it the player thread spins at the end of
+  // the file, walking the driver's list of streams without its lock, and closing the reader (or
+  // a backward seek, which reopens) while it spins frees a stream under it (SIGSEGV in libOniFile,
+  // about one run in 20 of the round-trip test on a loaded machine). With repeat it rewinds and
+  // waits for the next trigger instead (no crash in 500 runs).
   check(pc->setSpeed(-1.0f), "cannot set the playback speed");
-  check(pc->setRepeatEnabled(false), "cannot turn off repeat");
+  check(pc->setRepeatEnabled(true), "cannot turn on repeat");
   frames_ = std::min(pc->getNumberOfFrames(impl->depth), pc->getNumberOfFrames(impl->color));
   const openni::PixelFormat df = impl->depth.getVideoMode().getPixelFormat();
   if (df != openni::PIXEL_FORMAT_DEPTH_1_MM && df != openni::PIXEL_FORMAT_DEPTH_100_UM) {

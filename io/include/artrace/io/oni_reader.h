@@ -1,7 +1,9 @@
 // Plays ONI recordings through OpenNI2's own file driver: depth (DEPTH_1_MM or DEPTH_100_UM, to
 // metres) and colour (RGB888) in manual mode (speed -1: one frame per waitForAnyStream, none
-// dropped), repeat off so the file ends at its End record. The pose comes from an optional sidecar
-// trajectory (TUM format), else the camera is fixed at the origin.
+// dropped); next() ends after the last frame (the player itself repeats, so that its thread waits
+// for a trigger instead of spinning at the end of the file, where closing the device crashed it;
+// see open()). The pose comes from an optional sidecar trajectory (TUM format), else the camera is
+// fixed at the origin.
 //
 // Seek: PlaybackControl::seek crashes or hangs in Debian's OpenNI2 2.2 (OpenNI/OpenNI2 issue 51), so
 // seek(i) reopens the device and steps to frame i; frame-accurate, O(i).
