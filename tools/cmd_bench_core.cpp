@@ -89,6 +89,24 @@ double median_ms(int runs, const Fn& fn) {
   return median(ms);
 }
 
+/// Median over `runs` pairs of (time of `theirs` / time of `ours`), the two taken in turns after
+/// one warm-up each: ours' speed relative to theirs, measured side by side.
+template <class Ours, class Theirs>
+double paired_ratio(int runs, const Ours& ours, const Theirs& theirs) {
+  ours();
+  theirs();
+  std::vector<double> ratio;
+  for (int r = 0; r < runs; ++r) {
+    auto t0 = Clock::now();
+    ours();
+    const double a = ms_since(t0);
+    t0 = Clock::now();
+    theirs();
+    ratio.push_back(ms_since(t0) / std::max(1e-9, a));
+  }
+  return median(ratio);
+}
+
 /// Secondary workloads built from the primary hits: shadow packets towards each light (the lanes
 /// of one 4x2 block share the light), and one cosine-distributed bounce per hit (fixed seed).
 void secondary_rays(const core::KdTree& tree, const Workload& primary, const std::vector<HitPacket>& hits,
@@ -227,24 +245,26 @@ void run(const Options& opt) {
       }
     });
   });
-  const double packet_ms = median_ms(opt.runs, [&] {
+  auto packet_pass = [&] {
     parallel_tiles(arena, primary.tiles(), [&](size_t t) {
       for (size_t p = t * 8; p < std::min(primary.packets.size(), t * 8 + 8); ++p) {
         tree.intersect(primary.packets[p], primary.masks[p], scratch[p]);
       }
     });
-  });
+  };
+  const double packet_ms = median_ms(opt.runs, packet_pass);
   const size_t per_tile_shadow = 8 * std::max<size_t>(1, lights.size());
   std::vector<LaneMask> blocked(shadow.packets.size());
-  const double shadow_ms = median_ms(opt.runs, [&] {
+  auto shadow_pass = [&] {
     parallel_tiles(arena, primary.tiles(), [&](size_t t) {
       for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
         blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]);
       }
     });
-  });
+  };
+  const double shadow_ms = median_ms(opt.runs, shadow_pass);
   // the same packets with a last-occluder hint per light and tile, as the renderer traces them
-  const double hinted_ms = median_ms(opt.runs, [&] {
+  auto hinted_pass = [&] {
     parallel_tiles(arena, primary.tiles(), [&](size_t t) {
       std::vector<core::ShadowHint> hints(std::max<size_t>(1, lights.size()));
       for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
@@ -252,7 +272,8 @@ void run(const Options& opt) {
         if (b != blocked[p]) throw std::logic_error("bench-core: a shadow hint changed an answer");
       }
     });
-  });
+  };
+  const double hinted_ms = median_ms(opt.runs, hinted_pass);
   const double bounce_ms = median_ms(opt.runs, [&] {
     parallel_tiles(arena, primary.tiles(), [&](size_t t) {
       for (size_t p = t * 8; p < std::min(bounce.packets.size(), t * 8 + 8); ++p) {
@@ -294,12 +315,31 @@ void run(const Options& opt) {
     e["rays"]["primary_single"] = mrays(primary.rays, each_tile(primary, 8, [&](size_t p) {
       ref.intersect1(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
     }));
-    e["rays"]["primary_packet"] = mrays(primary.rays, each_tile(primary, 8, [&](size_t p) {
+    auto embree_pass = [&](const Workload& w, size_t per_tile, auto&& fn) {
+      return [&arena, &primary, packets = w.packets.size(), per_tile, fn] {
+        parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+          for (size_t p = t * per_tile; p < std::min(packets, (t + 1) * per_tile); ++p) fn(p);
+        });
+      };
+    };
+    const auto embree_packet_pass = embree_pass(primary, 8, [&](size_t p) {
       ref.intersect8(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
-    }));
-    e["rays"]["shadow"] = mrays(shadow.rays, each_tile(shadow, per_tile_shadow, [&](size_t p) {
-      blocked[p] = ref.occluded8(shadow.packets[p], shadow.masks[p]);
-    }));
+    });
+    std::vector<LaneMask> embree_blocked(shadow.packets.size());
+    const auto embree_shadow_pass = embree_pass(shadow, per_tile_shadow, [&](size_t p) {
+      embree_blocked[p] = ref.occluded8(shadow.packets[p], shadow.masks[p]);
+    });
+    e["rays"]["primary_packet"] = mrays(primary.rays, median_ms(opt.runs, embree_packet_pass));
+    e["rays"]["shadow"] = mrays(shadow.rays, median_ms(opt.runs, embree_shadow_pass));
+    size_t shadow_disagree = 0;
+    for (size_t p = 0; p < shadow.packets.size(); ++p) shadow_disagree += embree_blocked[p] != blocked[p];
+    e["shadow_packets_disagreeing"] = shadow_disagree;
+    // Speed ratios (ours / Embree's) from runs taken in turns, ours then Embree's, the median of
+    // the per-pair ratios: the machine's drift over the benchmark cancels out.
+    e["paired_ratio"] = {{"runs", opt.runs},
+                         {"primary_packet", paired_ratio(opt.runs, packet_pass, embree_packet_pass)},
+                         {"shadow", paired_ratio(opt.runs, shadow_pass, embree_shadow_pass)},
+                         {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, embree_shadow_pass)}};
     e["rays"]["incoherent"] = mrays(bounce.rays, each_tile(bounce, 8, [&](size_t p) {
       ref.intersect1(bounce.packets[p], bounce.masks[p], &sink[p * kPacketSize]);
     }));
@@ -322,7 +362,14 @@ void run(const Options& opt) {
     }
     std::printf("\n");
   }
-  if (out.contains("embree")) std::printf("  embree build %.1f ms\n", out["embree"]["build_ms"].get<double>());
+  if (out.contains("embree")) {
+    const nlohmann::json& e = out["embree"];
+    std::printf("  embree build %.1f ms\n", e["build_ms"].get<double>());
+    std::printf("  speed ratio artrace / embree, runs in turns (median of %d pairs): primary_packet %.3f, shadow %.3f, "
+                "shadow_hinted %.3f\n",
+                opt.runs, e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
+                e["paired_ratio"]["shadow_hinted"].get<double>());
+  }
   write_json(opt.json, out);
 }
 

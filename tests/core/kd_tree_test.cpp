@@ -201,6 +201,55 @@ TEST(KdTree, PacketsEqualSingleRaysOnEveryKernel) {
   set_simd_level(saved);
 }
 
+/// Packets of rays parallel to the tree's own split planes, half of them lying in the plane (the
+/// split distance is 0 * inf = NaN: both children), half off it (an infinite distance: one
+/// child), equal brute force on every kernel, closest and any hit.
+TEST(KdTree, PacketsParallelToSplitPlanesMatchBruteForceOnEveryKernel) {
+  std::mt19937 rng(21);
+  auto tris = adversarial_scene();
+  const auto soup = random_soup(rng, 3000, 0.6f);
+  tris.insert(tris.end(), soup.begin(), soup.end());
+  const KdTree tree(tris);
+  std::vector<std::pair<int, float>> planes;
+  for (const KdNode& n : tree.nodes()) {
+    if (!n.is_leaf()) planes.push_back({n.axis(), n.split});
+  }
+  ASSERT_GT(planes.size(), 100u);
+  const SimdLevel saved = simd_level();
+  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+    if (!simd_level_supported(level)) continue;
+    set_simd_level(level);
+    std::mt19937 r2(22);
+    size_t hits = 0, checked = 0;
+    for (size_t k = 0; k < planes.size(); k += std::max<size_t>(1, planes.size() / 400)) {
+      const auto [axis, split] = planes[k];
+      RayPacket packet;
+      for (int i = 0; i < kPacketSize; ++i) {
+        glm::vec3 o = test::random_point(r2, -2.0f, 12.0f), d = test::random_direction(r2);
+        o[axis] = i % 2 == 0 ? split : split + 0.25f * static_cast<float>(i);
+        d[axis] = 0.0f;
+        packet.set(i, Ray{o, glm::normalize(d)});
+      }
+      HitPacket got;
+      tree.intersect(packet, kAllLanes, got);
+      const LaneMask blocked = tree.occluded(packet, kAllLanes);
+      for (int i = 0; i < kPacketSize; ++i) {
+        const Ray r = packet.get(i);
+        const Hit ref = intersect_brute_force(r, tris);
+        ++checked;
+        hits += ref.valid();
+        ASSERT_EQ(got.prim[i], ref.prim) << to_string(level) << " plane " << k << " lane " << i;
+        if (ref.valid()) {
+          ASSERT_NEAR(got.t[i], ref.t, 1e-5f * std::max(1.0f, ref.t));
+        }
+        ASSERT_EQ(((blocked >> i) & 1u) != 0, occluded_brute_force(r, tris)) << to_string(level) << " plane " << k;
+      }
+    }
+    EXPECT_GT(hits, checked / 10) << "the rays should hit something";
+  }
+  set_simd_level(saved);
+}
+
 TEST(KdTree, BuildIsIdenticalForAnyThreadCount) {
   std::mt19937 rng(3);
   const auto tris = random_soup(rng, 30000, 0.3f);

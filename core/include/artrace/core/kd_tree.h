@@ -57,6 +57,7 @@ struct KdNode {
   int axis() const { return static_cast<int>(bits & 3u); }
   uint32_t left_child() const { return bits >> 2; }
   uint32_t prim_count() const { return bits >> 2; }
+  bool is_empty_leaf() const { return bits == kLeafTag; }
 
   static KdNode make_inner(int axis, float split_pos, uint32_t left) {
     KdNode n;
