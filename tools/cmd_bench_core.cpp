@@ -331,9 +331,21 @@ void run(const Options& opt) {
     });
     e["rays"]["primary_packet"] = mrays(primary.rays, median_ms(opt.runs, embree_packet_pass));
     e["rays"]["shadow"] = mrays(shadow.rays, median_ms(opt.runs, embree_shadow_pass));
-    size_t shadow_disagree = 0;
-    for (size_t p = 0; p < shadow.packets.size(); ++p) shadow_disagree += embree_blocked[p] != blocked[p];
+    // Where the two disagree, brute force says who is right.
+    size_t shadow_disagree = 0, ours_wrong = 0, embree_wrong = 0;
+    for (size_t p = 0; p < shadow.packets.size(); ++p) {
+      const LaneMask differ = embree_blocked[p] ^ blocked[p];
+      if (!differ) continue;
+      ++shadow_disagree;
+      for (int i = 0; i < kPacketSize; ++i) {
+        if (!((differ >> i) & 1u)) continue;
+        const bool truth = core::occluded_brute_force(shadow.packets[p].get(i), tris);
+        ours_wrong += (((blocked[p] >> i) & 1u) != 0) != truth;
+        embree_wrong += (((embree_blocked[p] >> i) & 1u) != 0) != truth;
+      }
+    }
     e["shadow_packets_disagreeing"] = shadow_disagree;
+    e["shadow_disagreeing_lanes_wrong"] = {{"artrace", ours_wrong}, {"embree", embree_wrong}};
     // Speed ratios (ours / Embree's) from runs taken in turns, ours then Embree's, the median of
     // the per-pair ratios: the machine's drift over the benchmark cancels out.
     e["paired_ratio"] = {{"runs", opt.runs},
@@ -369,6 +381,10 @@ void run(const Options& opt) {
                 "shadow_hinted %.3f\n",
                 opt.runs, e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
                 e["paired_ratio"]["shadow_hinted"].get<double>());
+    std::printf("  shadow packets answered differently by embree: %zu (the differing lanes, by brute force: %zu of ours "
+                "wrong, %zu of embree's)\n",
+                e["shadow_packets_disagreeing"].get<size_t>(), e["shadow_disagreeing_lanes_wrong"]["artrace"].get<size_t>(),
+                e["shadow_disagreeing_lanes_wrong"]["embree"].get<size_t>());
   }
   write_json(opt.json, out);
 }
