@@ -27,6 +27,18 @@ glm::vec3 pixel_linear(const ColorImage& img, int x, int y) {
   return {core::srgb8_to_linear(px[0]), core::srgb8_to_linear(px[1]), core::srgb8_to_linear(px[2])};
 }
 
+/// The light passing along `r` to its end (1 free, 0 blocked, between through glass): the
+/// scene's transmittance query where it has transmissive triangles. A ray crossing more glass
+/// than the kernels keep count of is taken as blocked by whatever it meets.
+float light_passing(const core::TwoLevelScene& scene, const core::Ray& r) {
+  if (!scene.has_transmittance()) return scene.occluded(r) ? 0.0f : 1.0f;
+  core::RayPacket packet;
+  packet.set(0, r);
+  float trans[core::kPacketSize] = {};
+  if (scene.transmittance(packet, 1u, trans) & 1u) return scene.occluded(r) ? 0.0f : 1.0f;
+  return trans[0];
+}
+
 struct Shader {
   const SensorFrame& frame;
   const core::TwoLevelScene& scene;
@@ -65,11 +77,13 @@ struct Shader {
         const glm::vec3 to = l.position - p;
         const float cosine = glm::dot(n, glm::normalize(to));
         if (cosine <= 0.0f) continue;
+        float pass = 1.0f;
         if (opt.shadows) {
           const glm::vec3 o = core::offset_ray_origin(p, n, magnitude);
-          if (scene.occluded(core::Ray{o, l.position - o, 0.0f, 1.0f})) continue;
+          pass = light_passing(scene, core::Ray{o, l.position - o, 0.0f, 1.0f});
+          if (pass <= 0.0f) continue;
         }
-        c += m.color * l.color * cosine;
+        c += m.color * l.color * (cosine * pass);
       }
       return c;
     }
@@ -228,25 +242,22 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
           const float cosine = glm::dot(n, n) > 0.0f ? glm::dot(n, to / dist) : 1.0f;
           if (cosine <= 0.0f) continue;
           all += l.color * cosine;
-          bool blocked = false;
+          float pass = 1.0f;  // light reaching p past the virtual objects (glass lets some through)
           if (meets_virtual(p, to)) {
             ++local_rays;
             const glm::vec3 side = glm::dot(n, n) > 0.0f ? n : to / dist;
             const glm::vec3 o = core::offset_ray_origin(p, side);
-            blocked = scene.occluded(core::Ray{o, l.position - o, 0.0f, 1.0f});
+            pass = light_passing(scene, core::Ray{o, l.position - o, 0.0f, 1.0f});
           }
-          if (blocked && proxy && !proxy->empty() && dist > kRealSkip) {
+          if (pass < 1.0f && proxy && !proxy->empty() && dist > kRealSkip) {
             const glm::vec3 l_dir = to / dist;
             if (proxy->scene().occluded(core::Ray{p + kRealSkip * l_dir, l_dir, 0.0f, dist - kRealSkip})) {
               all -= l.color * cosine;  // the real scene already shadows this point from this light
               continue;
             }
           }
-          if (blocked) {
-            blocked_any = true;
-          } else {
-            lit += l.color * cosine;
-          }
+          blocked_any = blocked_any || pass < 1.0f;
+          lit += l.color * (cosine * pass);
         }
         if (blocked_any) {
           factor[static_cast<size_t>(y) * w + x] = lit / all;
@@ -286,6 +297,13 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
 }
 
 }  // namespace
+
+float shadow_transmittance(const VirtualMaterial& m) {
+  if (m.kind != VirtualMaterial::kGlass) return 0.0f;
+  const float r0 = (m.ior - 1.0f) / (m.ior + 1.0f);
+  const float tint = (m.color.r + m.color.g + m.color.b) / 3.0f;
+  return std::clamp((1.0f - r0 * r0) * tint, 0.0f, 1.0f);
+}
 
 VirtualLight estimate_light(const SensorFrame& frame) {
   double sum = 0.0;

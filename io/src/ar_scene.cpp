@@ -4,6 +4,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <set>
@@ -139,6 +140,8 @@ namespace artrace::io {
 
 ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
   std::vector<core::Triangle> fixed;
+  std::vector<float> fixed_pass;  // the static triangles' transmittance (glass lets light through)
+  bool glass = false;
   static_bounds_.resize(file.models.size());
   for (size_t p = 0; p < file.models.size(); ++p) {
     const GltfModel& model = file.loaded[p];
@@ -167,10 +170,19 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
                            glm::vec3(m * glm::vec4(tri.v2, 1.0f))});
           for (const glm::vec3& v : {fixed.back().v0, fixed.back().v1, fixed.back().v2}) static_bounds_[p].extend(v);
           static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t});
+          fixed_pass.push_back(ar::shadow_transmittance(material_of(p, mesh, t)));
+          glass = glass || fixed_pass.back() > 0.0f;
         }
       } else {
         // hierarchically transformed: an instance of the mesh, moved by the node animation
-        if (meshes[mesh].index == core::kInvalidId) meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
+        if (meshes[mesh].index == core::kInvalidId) {
+          meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
+          std::vector<float> pass(gm.tris.size());
+          for (uint32_t t = 0; t < gm.tris.size(); ++t) pass[t] = ar::shadow_transmittance(material_of(p, mesh, t));
+          if (std::any_of(pass.begin(), pass.end(), [](float x) { return x > 0.0f; })) {
+            scene_.set_mesh_transmittance(meshes[mesh], std::move(pass));
+          }
+        }
         const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
         if (parts_.size() <= h.index) parts_.resize(h.index + 1);
         core::Aabb box;
@@ -180,6 +192,7 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
     }
   }
   scene_.set_static(std::move(fixed));
+  if (glass) scene_.set_static_transmittance(std::move(fixed_pass));
   update(0.0);
 }
 

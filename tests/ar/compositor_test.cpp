@@ -140,6 +140,58 @@ TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
   EXPECT_LT(out.at(cx, cy)[0], frame.color.at(cx, cy)[0]);
 }
 
+/// A glass box given its triangles' transmittance darkens the wall where the opaque box would,
+/// but only by the light its two faces on the way (in and out) hold back: T^2 of the light passes.
+TEST(Compositor, GlassBoxCastsALighterShadowOnTheRealWall) {
+  const SensorFrame frame = wall_frame();
+  const glm::vec3 lo(0.05f, -0.25f, 1.3f), hi(0.25f, -0.05f, 1.5f);
+  const VirtualMaterial glass{VirtualMaterial::kGlass, glm::vec3(0.9f, 0.8f, 0.7f), 1.5f};
+  const float t = shadow_transmittance(glass);
+  ASSERT_NEAR(t, (1.0f - 0.04f) * 0.8f, 1e-6f) << "Fresnel at normal incidence, mean tint";
+  EXPECT_EQ(shadow_transmittance(VirtualMaterial{}), 0.0f) << "diffuse lets nothing through";
+  core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
+  const auto tris = box(lo, hi);
+  const core::MeshHandle mesh = scene.add_rigid_mesh(tris);
+  scene.set_mesh_transmittance(mesh, std::vector<float>(tris.size(), t));
+  scene.add_instance(mesh, glm::mat4(1.0f));
+  scene.commit();
+  CompositeOptions opt;
+  opt.ambient = 0.3f;
+  const VirtualLight light{{-0.4f, -0.5f, 0.3f}, {0.9f, 0.8f, 0.7f}};
+  opt.lights = {light};
+  opt.threads = 2;
+  const ColorImage out = composite(frame, scene, [&](const core::Hit&) { return glass; }, opt);
+
+  int checked = 0, lit_wrong = 0;
+  for (int y = 1; y + 1 < kH; ++y) {
+    for (int x = 1; x + 1 < kW; ++x) {
+      const glm::vec3 w = wall_point(x, y);
+      if (scene.intersect(core::Ray{glm::vec3(0.0f), w, 0.0f, 1.0f}).valid()) continue;
+      auto shadowed = [&](int xx, int yy) {
+        return segment_hits_box(glm::dvec3(wall_point(xx, yy)), glm::dvec3(light.position), glm::dvec3(lo), glm::dvec3(hi));
+      };
+      const bool s = shadowed(x, y);
+      if (s != shadowed(x - 1, y) || s != shadowed(x + 1, y) || s != shadowed(x, y - 1) || s != shadowed(x, y + 1)) continue;
+      const uint8_t* in = frame.color.at(x, y);
+      const uint8_t* o = out.at(x, y);
+      if (!s) {
+        lit_wrong += in[0] != o[0] || in[1] != o[1] || in[2] != o[2];
+        continue;
+      }
+      ++checked;
+      const float cosine = glm::normalize(light.position - w).z * -1.0f;
+      for (int c = 0; c < 3; ++c) {
+        const float factor = (opt.ambient + light.color[c] * cosine * t * t) / (opt.ambient + light.color[c] * cosine);
+        const int expected = core::linear_to_srgb8(core::srgb8_to_linear(in[c]) * factor);
+        EXPECT_NEAR(o[c], expected, 1) << x << "," << y << " channel " << c;
+      }
+      EXPECT_LT(o[0], in[0]) << "still a shadow";
+    }
+  }
+  EXPECT_GT(checked, 200) << "the shadow is on the wall";
+  EXPECT_EQ(lit_wrong, 0) << "pixels darkened outside the analytic shadow";
+}
+
 TEST(Compositor, VirtualMirrorShowsTheRecordedWallThroughTheDepthMesh) {
   const SensorFrame frame = wall_frame();
   // a mirror in the plane x = 0.25 facing the optical axis, from 0.8 m to 1.9 m away
