@@ -117,6 +117,12 @@ void TwoLevelScene::set_mesh_transmittance(MeshHandle mesh, std::vector<float> p
   dirty_ = true;
 }
 
+void TwoLevelScene::set_deformable_transmittance(DeformableHandle mesh, std::vector<float> pass) {
+  const DeformableMesh& d = deformable(mesh);
+  deformables_[mesh.index].pass = checked_pass(std::move(pass), d.mesh().indices.size(), "set_deformable_transmittance");
+  has_transmittance_ = true;
+}
+
 MeshHandle TwoLevelScene::add_rigid_mesh(std::vector<Triangle> object_space) {
   RigidMesh m;
   m.bvh = std::make_unique<Bvh>(std::move(object_space));
@@ -205,14 +211,20 @@ void TwoLevelScene::commit() {
     d.id = id;
     data_.push_back(d);
   };
-  const std::vector<float> opaque;
   if (static_bvh_) add(*static_bvh_, identity, kStaticObject, static_pass_);
   for (uint32_t i = 0; i < instances_.size(); ++i) {
     const Instance& inst = instances_[i];
     if (inst.alive) add(*meshes_[inst.mesh].bvh, inst.world_from_object, i, meshes_[inst.mesh].pass);
   }
   for (uint32_t i = 0; i < deformables_.size(); ++i) {
-    if (deformables_[i].mesh) add(deformables_[i].mesh->bvh(), identity, deformable_object_id({i, 0}), opaque);
+    const Deformable& d = deformables_[i];
+    if (!d.mesh) continue;
+    if (!d.pass.empty() && d.pass.size() != d.mesh->bvh().triangles().size()) {
+      throw std::logic_error("TwoLevelScene::commit: deformable mesh " + std::to_string(i) + " has " +
+                             std::to_string(d.mesh->bvh().triangles().size()) + " triangles but " +
+                             std::to_string(d.pass.size()) + " transmittance values (set them again after a rebuild)");
+    }
+    add(d.mesh->bvh(), identity, deformable_object_id({i, 0}), d.pass);
   }
   order_.resize(data_.size());
   for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;

@@ -159,6 +159,7 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
         tm.positions = gm.positions;
         tm.indices = gm.indices;
         const core::DeformableHandle h = scene_.add_deformable(std::move(tm));
+        if (std::vector<float> pass = glass_pass(p, mesh); !pass.empty()) scene_.set_deformable_transmittance(h, std::move(pass));
         if (skinned_.size() <= h.index) skinned_.resize(h.index + 1);
         skinned_[h.index] = Skinned{p, static_cast<int>(n), mesh, model.nodes[n].skin, h};
       } else if (!animated) {
@@ -177,11 +178,7 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
         // hierarchically transformed: an instance of the mesh, moved by the node animation
         if (meshes[mesh].index == core::kInvalidId) {
           meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
-          std::vector<float> pass(gm.tris.size());
-          for (uint32_t t = 0; t < gm.tris.size(); ++t) pass[t] = ar::shadow_transmittance(material_of(p, mesh, t));
-          if (std::any_of(pass.begin(), pass.end(), [](float x) { return x > 0.0f; })) {
-            scene_.set_mesh_transmittance(meshes[mesh], std::move(pass));
-          }
+          if (std::vector<float> pass = glass_pass(p, mesh); !pass.empty()) scene_.set_mesh_transmittance(meshes[mesh], std::move(pass));
         }
         const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
         if (parts_.size() <= h.index) parts_.resize(h.index + 1);
@@ -236,6 +233,18 @@ ar::VirtualMaterial ArRuntime::material(const core::Hit& hit) const {
   }
   const Part& part = parts_.at(hit.inst);
   return material_of(part.placement, part.mesh, hit.prim);
+}
+
+std::vector<float> ArRuntime::glass_pass(size_t placement, int mesh) const {
+  const size_t n = file_.loaded[placement].meshes.at(static_cast<size_t>(mesh)).tris.size();
+  std::vector<float> pass(n);
+  bool any = false;
+  for (uint32_t t = 0; t < n; ++t) {
+    pass[t] = ar::shadow_transmittance(material_of(placement, mesh, t));
+    any = any || pass[t] > 0.0f;
+  }
+  if (!any) pass.clear();
+  return pass;
 }
 
 ar::VirtualMaterial ArRuntime::material_of(size_t placement, int mesh, uint32_t triangle) const {

@@ -280,6 +280,66 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
   EXPECT_THROW(scene.set_mesh_transmittance(MeshHandle{}, object_pass), std::invalid_argument);
 }
 
+/// A deforming mesh carries its triangles' transmittance too: right after it is added, after its
+/// vertices move (refit), and, once set again, after a rebuild with fewer triangles (commit
+/// refuses the stale values until then).
+TEST(TwoLevelScene, DeformableMeshTransmittanceEqualsBruteForce) {
+  std::mt19937 rng(73);
+  const std::vector<Triangle> soup = test::random_soup(rng, 400, 0.6f);
+  TriangleMesh mesh;
+  for (uint32_t k = 0; k < soup.size(); ++k) {
+    mesh.positions.insert(mesh.positions.end(), {soup[k].v0, soup[k].v1, soup[k].v2});
+    mesh.indices.push_back({3 * k, 3 * k + 1, 3 * k + 2});
+  }
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  std::vector<float> pass(soup.size());
+  for (float& v : pass) v = uni(rng) < 0.3f ? 0.0f : 0.2f + 0.8f * uni(rng);
+  TwoLevelScene scene;
+  const DeformableHandle h = scene.add_deformable(mesh);
+  scene.set_deformable_transmittance(h, pass);
+  auto current = [&] {
+    const TriangleMesh& m = scene.deformable(h).mesh();
+    std::vector<Triangle> tris;
+    for (const glm::uvec3& i : m.indices) tris.push_back({m.positions[i.x], m.positions[i.y], m.positions[i.z]});
+    return tris;
+  };
+  auto check = [&](const std::vector<float>& p, const char* what) {
+    const std::vector<Triangle> tris = current();  // (the accessor marks the scene edited)
+    scene.commit();
+    std::mt19937 r2(6);
+    size_t partial = 0;
+    for (int k = 0; k < 200; ++k) {
+      RayPacket packet;
+      const glm::vec3 light = test::random_point(r2, 0.0f, 10.0f);
+      for (int i = 0; i < kPacketSize; ++i) {
+        const glm::vec3 o = test::random_point(r2, 0.0f, 10.0f);
+        packet.set(i, Ray{o, light - o, 0.0f, 1.0f});
+      }
+      float trans[kPacketSize];
+      const LaneMask unsure = scene.transmittance(packet, kAllLanes, trans);
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((unsure >> i) & 1u) continue;
+        const float ref = transmittance_brute_force(packet.get(i), tris, p);
+        ASSERT_NEAR(trans[i], ref, 1e-5f * std::max(1.0f, ref)) << what << " packet " << k << " lane " << i;
+        partial += ref > 0.0f && ref < 1.0f;
+      }
+    }
+    EXPECT_GT(partial, 100u) << what << ": the rays must cross transmissive triangles";
+  };
+  check(pass, "as added");
+  for (glm::vec3& v : scene.deformable(h).positions()) v += 0.3f * test::random_direction(rng);
+  scene.deformable(h).refit();
+  check(pass, "moved");
+  scene.deformable(h).indices().resize(250);
+  scene.deformable(h).rebuild();
+  EXPECT_THROW(scene.commit(), std::logic_error) << "400 values for 250 triangles";
+  pass.resize(250);
+  scene.set_deformable_transmittance(h, pass);
+  check(pass, "rebuilt");
+  EXPECT_THROW(scene.set_deformable_transmittance(h, std::vector<float>(10, 0.5f)), std::invalid_argument);
+  EXPECT_THROW(scene.set_deformable_transmittance(DeformableHandle{}, pass), std::invalid_argument);
+}
+
 TEST(TwoLevelScene, MisuseIsReported) {
   TwoLevelScene scene;
   const MeshHandle mesh = scene.add_rigid_mesh({{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}});

@@ -118,11 +118,13 @@ class TwoLevelScene {
 
   /// Light passing each triangle, for shadow rays through glass: pass[i] in (0, 1] for a
   /// transmissive triangle, 0 for an opaque one. For the static geometry (call after set_static,
-  /// which clears it) or a rigid mesh. Throws std::invalid_argument when the size differs from the
-  /// triangle count or a value is not in [0, 1]. Deformable meshes carry none (they are opaque to
-  /// transmittance queries).
+  /// which clears it), a rigid mesh or a deformable mesh (by its triangle index in the index
+  /// buffer; a rebuild with another triangle count needs a new one: commit() throws
+  /// std::logic_error until then). Throws std::invalid_argument when the size differs from the
+  /// triangle count or a value is not in [0, 1].
   void set_static_transmittance(std::vector<float> pass);
   void set_mesh_transmittance(MeshHandle mesh, std::vector<float> pass);
+  void set_deformable_transmittance(DeformableHandle mesh, std::vector<float> pass);
   /// Whether any transmittance was given; then every triangle without one counts as opaque.
   bool has_transmittance() const { return has_transmittance_; }
   /// In one traversal per level, for the lanes in `mask`: trans[i] = the product of the
@@ -164,6 +166,7 @@ class TwoLevelScene {
   };
   struct Deformable {
     std::unique_ptr<DeformableMesh> mesh;
+    std::vector<float> pass;
     uint32_t generation = 0;
   };
 

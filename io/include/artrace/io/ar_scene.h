@@ -101,6 +101,9 @@ class ArRuntime {
     core::DeformableHandle handle;
   };
   ar::VirtualMaterial material_of(size_t placement, int mesh, uint32_t triangle) const;
+  /// Each triangle's share of light let through to shadow rays (ar::shadow_transmittance); empty
+  /// when none of the mesh is glass.
+  std::vector<float> glass_pass(size_t placement, int mesh) const;
 
   const ArSceneFile& file_;
   core::TwoLevelScene scene_{core::TwoLevelScene::Config::kKdTreeBvh};
