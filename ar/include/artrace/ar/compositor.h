@@ -31,9 +31,9 @@ struct VirtualMaterial {
 /// The share of light a surface of `m` lets through to a shadow ray: glass passes what Fresnel
 /// leaves at normal incidence, tinted by its colour (the mean of the channels, since a shadow
 /// ray carries one number); anything else passes nothing. Give it to the scene as its
-/// triangles' transmittance (TwoLevelScene::set_static_transmittance / set_mesh_transmittance)
-/// and the glass's shadows come out lighter than an opaque object's, in the compositor's
-/// shadows among the virtual objects and on the real surfaces alike.
+/// triangles' transmittance (TwoLevelScene::set_static_transmittance, set_mesh_transmittance,
+/// set_deformable_transmittance) and the glass's shadows come out lighter than an opaque
+/// object's, in the compositor's shadows among the virtual objects and on the real surfaces alike.
 float shadow_transmittance(const VirtualMaterial& m);
 
 struct VirtualLight {
