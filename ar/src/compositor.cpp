@@ -32,7 +32,7 @@ glm::vec3 pixel_linear(const ColorImage& img, int x, int y) {
 /// than the kernels keep count of is taken as blocked by whatever it meets.
 float light_passing(const core::TwoLevelScene& scene, const core::Ray& r) {
   if (!scene.has_transmittance()) return scene.occluded(r) ? 0.0f : 1.0f;
-  core::RayPacket packet;
+  core::RayPacket packet{};  // the other lanes are masked off, but not left indeterminate
   packet.set(0, r);
   float trans[core::kPacketSize] = {};
   if (scene.transmittance(packet, 1u, trans) & 1u) return scene.occluded(r) ? 0.0f : 1.0f;
