@@ -76,6 +76,17 @@ void parallel_tiles(tbb::task_arena& arena, size_t tiles, const Fn& fn) {
   });
 }
 
+/// One pass over a workload's packets, tile by tile as the renderer hands them out (`per_tile`
+/// packets a tile): fn(p) for every packet p.
+template <class Fn>
+auto tile_pass(tbb::task_arena& arena, size_t tiles, size_t packets, size_t per_tile, Fn fn) {
+  return [&arena, tiles, packets, per_tile, fn] {
+    parallel_tiles(arena, tiles, [&](size_t t) {
+      for (size_t p = t * per_tile; p < std::min(packets, (t + 1) * per_tile); ++p) fn(p);
+    });
+  };
+}
+
 /// Median of `runs` timings in ms after one warm-up call.
 template <class Fn>
 double median_ms(int runs, const Fn& fn) {
@@ -236,32 +247,22 @@ void run(const Options& opt) {
 
   std::vector<HitPacket> scratch(primary.packets.size());
   auto mrays = [](size_t rays, double ms) { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; };
-  const double single_ms = median_ms(opt.runs, [&] {
-    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-      for (size_t p = t * 8; p < std::min(primary.packets.size(), t * 8 + 8); ++p) {
-        for (int i = 0; i < kPacketSize; ++i) {
-          if ((primary.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(primary.packets[p].get(i)).prim;
-        }
-      }
-    });
-  });
-  auto packet_pass = [&] {
-    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-      for (size_t p = t * 8; p < std::min(primary.packets.size(), t * 8 + 8); ++p) {
-        tree.intersect(primary.packets[p], primary.masks[p], scratch[p]);
+  auto pass = [&](const Workload& w, size_t per_tile, auto fn) {
+    return tile_pass(arena, primary.tiles(), w.packets.size(), per_tile, fn);
+  };
+  auto single_rays = [&](const Workload& w) {
+    return pass(w, 8, [&, &w = w](size_t p) {
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((w.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(w.packets[p].get(i)).prim;
       }
     });
   };
+  const double single_ms = median_ms(opt.runs, single_rays(primary));
+  const auto packet_pass = pass(primary, 8, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
   const double packet_ms = median_ms(opt.runs, packet_pass);
   const size_t per_tile_shadow = 8 * std::max<size_t>(1, lights.size());
   std::vector<LaneMask> blocked(shadow.packets.size());
-  auto shadow_pass = [&] {
-    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-      for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
-        blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]);
-      }
-    });
-  };
+  const auto shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
   const double shadow_ms = median_ms(opt.runs, shadow_pass);
   // the same packets with a last-occluder hint per light and tile, as the renderer traces them
   auto hinted_pass = [&] {
@@ -274,15 +275,7 @@ void run(const Options& opt) {
     });
   };
   const double hinted_ms = median_ms(opt.runs, hinted_pass);
-  const double bounce_ms = median_ms(opt.runs, [&] {
-    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-      for (size_t p = t * 8; p < std::min(bounce.packets.size(), t * 8 + 8); ++p) {
-        for (int i = 0; i < kPacketSize; ++i) {
-          if ((bounce.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(bounce.packets[p].get(i)).prim;
-        }
-      }
-    });
-  });
+  const double bounce_ms = median_ms(opt.runs, single_rays(bounce));
   out["ray_counts"] = {{"primary", primary.rays}, {"shadow", shadow.rays}, {"incoherent", bounce.rays}};
   out["rays"] = {{"primary_single", mrays(primary.rays, single_ms)},
                  {"primary_packet", mrays(primary.rays, packet_ms)},
@@ -304,29 +297,16 @@ void run(const Options& opt) {
       }
     }
     e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
-    auto each_tile = [&](const Workload& w, size_t per_tile, auto&& fn) {
-      return median_ms(opt.runs, [&] {
-        parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-          for (size_t p = t * per_tile; p < std::min(w.packets.size(), (t + 1) * per_tile); ++p) fn(p);
-        });
-      });
-    };
     std::vector<uint32_t> sink(primary.packets.size() * kPacketSize);
-    e["rays"]["primary_single"] = mrays(primary.rays, each_tile(primary, 8, [&](size_t p) {
-      ref.intersect1(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
-    }));
-    auto embree_pass = [&](const Workload& w, size_t per_tile, auto&& fn) {
-      return [&arena, &primary, packets = w.packets.size(), per_tile, fn] {
-        parallel_tiles(arena, primary.tiles(), [&](size_t t) {
-          for (size_t p = t * per_tile; p < std::min(packets, (t + 1) * per_tile); ++p) fn(p);
-        });
-      };
+    auto embree_single = [&](const Workload& w) {
+      return pass(w, 8, [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
     };
-    const auto embree_packet_pass = embree_pass(primary, 8, [&](size_t p) {
+    e["rays"]["primary_single"] = mrays(primary.rays, median_ms(opt.runs, embree_single(primary)));
+    const auto embree_packet_pass = pass(primary, 8, [&](size_t p) {
       ref.intersect8(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
     });
     std::vector<LaneMask> embree_blocked(shadow.packets.size());
-    const auto embree_shadow_pass = embree_pass(shadow, per_tile_shadow, [&](size_t p) {
+    const auto embree_shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) {
       embree_blocked[p] = ref.occluded8(shadow.packets[p], shadow.masks[p]);
     });
     e["rays"]["primary_packet"] = mrays(primary.rays, median_ms(opt.runs, embree_packet_pass));
@@ -352,9 +332,7 @@ void run(const Options& opt) {
                          {"primary_packet", paired_ratio(opt.runs, packet_pass, embree_packet_pass)},
                          {"shadow", paired_ratio(opt.runs, shadow_pass, embree_shadow_pass)},
                          {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, embree_shadow_pass)}};
-    e["rays"]["incoherent"] = mrays(bounce.rays, each_tile(bounce, 8, [&](size_t p) {
-      ref.intersect1(bounce.packets[p], bounce.masks[p], &sink[p * kPacketSize]);
-    }));
+    e["rays"]["incoherent"] = mrays(bounce.rays, median_ms(opt.runs, embree_single(bounce)));
     out["embree"] = e;
 #else
     throw std::runtime_error("this build has no Embree (install libembree-dev and reconfigure)");
