@@ -4,7 +4,6 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
-#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <set>
@@ -165,14 +164,15 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
       } else if (!animated) {
         // static: into the kd-tree, in world space
         const glm::mat4 m = place.world_from_model() * rest[n];
+        const std::vector<float> pass = glass_pass(p, mesh);
+        glass = glass || !pass.empty();
         for (uint32_t t = 0; t < gm.tris.size(); ++t) {
           const core::Triangle& tri = gm.tris[t];
           fixed.push_back({glm::vec3(m * glm::vec4(tri.v0, 1.0f)), glm::vec3(m * glm::vec4(tri.v1, 1.0f)),
                            glm::vec3(m * glm::vec4(tri.v2, 1.0f))});
           for (const glm::vec3& v : {fixed.back().v0, fixed.back().v1, fixed.back().v2}) static_bounds_[p].extend(v);
           static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t});
-          fixed_pass.push_back(ar::shadow_transmittance(material_of(p, mesh, t)));
-          glass = glass || fixed_pass.back() > 0.0f;
+          fixed_pass.push_back(pass.empty() ? 0.0f : pass[t]);
         }
       } else {
         // hierarchically transformed: an instance of the mesh, moved by the node animation

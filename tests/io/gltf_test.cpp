@@ -177,5 +177,43 @@ TEST(ArRuntime, TheThreeKindsOfObjectsStaticAnimatedAndSkinned) {
   std::filesystem::remove_all(dir);
 }
 
+/// Glass of each kind gives the scene its transmittance: a shadow ray through a glass box (two
+/// faces) keeps T^2 of the light, static or node-animated, and one through the skinned tube some
+/// but not all of it; the same models, not glass, block it.
+TEST(ArRuntime, GlassOfEveryKindLetsShadowRaysThrough) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_glass";
+  std::filesystem::create_directories(dir);
+  write_gltf(make_bending_tube(1.2f, 0.2f, {0.2f, 0.4f, 0.9f}), dir / "tube.gltf");
+  write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
+  auto scene_json = [](const char* material) {
+    return std::string(R"({ "models": [
+      { "file": "tube.gltf", "animation": { "clip": "bend" })") + material + R"( },
+      { "file": "box.gltf", "position": [3, 0, 0])" + material + R"( },
+      { "file": "box.gltf", "position": [-3, 0, 0], "animation": { "clip": "spin" })" + material + " } ] }";
+  };
+  const char* glass = R"(, "material": { "kind": "glass", "base_color": [0.9, 0.8, 0.7], "ior": 1.5 })";
+  const float t = ar::shadow_transmittance({ar::VirtualMaterial::kGlass, glm::vec3(0.9f, 0.8f, 0.7f), 1.5f});
+  for (const bool is_glass : {true, false}) {
+    std::ofstream(dir / "scene.json") << scene_json(is_glass ? glass : "");
+    const ArSceneFile file = load_ar_scene(dir / "scene.json");
+    ArRuntime rt(file);
+    rt.update(1.0);
+    core::RayPacket packet{};
+    packet.set(0, core::Ray{{3.0f, 0.1f, 5.0f}, {0.0f, 0.0f, -10.0f}, 0.0f, 1.0f});   // the static box
+    packet.set(1, core::Ray{{-3.0f, 0.1f, 5.0f}, {0.0f, 0.0f, -10.0f}, 0.0f, 1.0f});  // the spinning box's axis
+    packet.set(2, core::Ray{{-0.45f, 0.6f, 5.0f}, {0.0f, 0.0f, -10.0f}, 0.0f, 1.0f});  // the bent tube
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(rt.scene().occluded(packet.get(i))) << "ray " << i << " meets its model";
+    EXPECT_EQ(rt.scene().has_transmittance(), is_glass);
+    if (!is_glass) continue;
+    float trans[core::kPacketSize];
+    ASSERT_EQ(rt.scene().transmittance(packet, 0x7u, trans), 0u) << "no unsure lanes";
+    EXPECT_NEAR(trans[0], t * t, 1e-6f) << "static glass box";
+    EXPECT_NEAR(trans[1], t * t, 1e-6f) << "node-animated glass box";
+    EXPECT_GT(trans[2], 0.0f) << "skinned glass tube";
+    EXPECT_LT(trans[2], t) << "skinned glass tube: at least one wall";
+  }
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace artrace::io
