@@ -66,58 +66,77 @@ bool segment_hits_box(glm::dvec3 p, glm::dvec3 q, glm::dvec3 lo, glm::dvec3 hi) 
   return t0 <= t1;
 }
 
-TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
-  const SensorFrame frame = wall_frame();
-  const glm::vec3 lo(0.05f, -0.25f, 1.3f), hi(0.25f, -0.05f, 1.5f);
-  core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
-  scene.add_instance(scene.add_rigid_mesh(box(lo, hi)), glm::mat4(1.0f));
-  scene.commit();
+/// The shadow tests' box, its light, and their options: ambient 0.3, that light, 2 threads.
+const glm::vec3 kBoxLo(0.05f, -0.25f, 1.3f), kBoxHi(0.25f, -0.05f, 1.5f);
+const VirtualLight kLight{{-0.4f, -0.5f, 0.3f}, {0.9f, 0.8f, 0.7f}};
+
+CompositeOptions shadow_options() {
   CompositeOptions opt;
   opt.ambient = 0.3f;
-  const VirtualLight light{{-0.4f, -0.5f, 0.3f}, {0.9f, 0.8f, 0.7f}};
-  opt.lights = {light};
+  opt.lights = {kLight};
   opt.threads = 2;
-  const MaterialLookup diffuse = [](const core::Hit&) { return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f), 1.5f}; };
-  CompositeStats st;
-  const ColorImage out = composite(frame, scene, diffuse, opt, &st);
+  return opt;
+}
 
-  int in_shadow = 0, wrong = 0, boundary = 0;
+/// The wall pixels of `out` against the analytic shadow of the box [kBoxLo, kBoxHi] from kLight: away
+/// from the shadow's edge (where either answer is right) and from the box itself, a pixel outside
+/// the shadow keeps its recorded colour, and one inside is scaled, by differential rendering, by
+/// (ambient + light cos passing) / (ambient + light cos), `passing` the light the box lets through.
+struct WallShadow {
+  int in_shadow = 0, wrong = 0, boundary = 0;  ///< wrong: darkened outside the shadow, or not inside
+};
+WallShadow check_wall_shadow(const SensorFrame& frame, const ColorImage& out, const core::TwoLevelScene& scene,
+                             float passing) {
+  const VirtualLight& light = kLight;
+  const float ambient = shadow_options().ambient;
+  WallShadow r;
+  auto shadowed = [&](int x, int y) {
+    return segment_hits_box(glm::dvec3(wall_point(x, y)), glm::dvec3(light.position), glm::dvec3(kBoxLo), glm::dvec3(kBoxHi));
+  };
   for (int y = 1; y + 1 < kH; ++y) {
     for (int x = 1; x + 1 < kW; ++x) {
-      // pixels where the box itself is seen are the compositor's business, not this test's
+      // pixels where the box itself is seen are the compositor's business, not this check's
       const glm::vec3 w = wall_point(x, y);
       if (scene.intersect(core::Ray{glm::vec3(0.0f), w, 0.0f, 1.0f}).valid()) continue;
-      auto shadowed = [&](int xx, int yy) {
-        return segment_hits_box(glm::dvec3(wall_point(xx, yy)), glm::dvec3(light.position), glm::dvec3(lo), glm::dvec3(hi));
-      };
       const bool s = shadowed(x, y);
-      // pixels whose neighbours disagree sit on the shadow's edge: either answer is right there
-      const bool edge = s != shadowed(x - 1, y) || s != shadowed(x + 1, y) || s != shadowed(x, y - 1) || s != shadowed(x, y + 1);
+      if (s != shadowed(x - 1, y) || s != shadowed(x + 1, y) || s != shadowed(x, y - 1) || s != shadowed(x, y + 1)) {
+        ++r.boundary;
+        continue;
+      }
       const uint8_t* in = frame.color.at(x, y);
       const uint8_t* o = out.at(x, y);
       const bool darkened = in[0] != o[0] || in[1] != o[1] || in[2] != o[2];
-      if (edge) {
-        ++boundary;
-        continue;
-      }
-      in_shadow += s;
+      r.in_shadow += s;
       if (s != darkened) {
-        ++wrong;
+        ++r.wrong;
         continue;
       }
       if (!s) continue;
-      // differential rendering: recorded colour x ambient / (ambient + light x cos)
       const float cosine = glm::normalize(light.position - w).z * -1.0f;
       for (int c = 0; c < 3; ++c) {
-        const float factor = opt.ambient / (opt.ambient + light.color[c] * cosine);
+        const float factor = (ambient + light.color[c] * cosine * passing) / (ambient + light.color[c] * cosine);
         const int expected = core::linear_to_srgb8(core::srgb8_to_linear(in[c]) * factor);
         EXPECT_NEAR(o[c], expected, 1) << x << "," << y << " channel " << c;
       }
     }
   }
-  EXPECT_GT(in_shadow, 200) << "the shadow is on the wall";
-  EXPECT_EQ(wrong, 0) << "pixels darkened outside the analytic shadow, or left lit inside it";
-  EXPECT_LT(boundary, in_shadow / 2);
+  return r;
+}
+
+TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
+  const SensorFrame frame = wall_frame();
+  core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
+  scene.add_instance(scene.add_rigid_mesh(box(kBoxLo, kBoxHi)), glm::mat4(1.0f));
+  scene.commit();
+  CompositeOptions opt = shadow_options();
+  const MaterialLookup diffuse = [](const core::Hit&) { return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f), 1.5f}; };
+  CompositeStats st;
+  const ColorImage out = composite(frame, scene, diffuse, opt, &st);
+
+  const WallShadow check = check_wall_shadow(frame, out, scene, 0.0f);
+  EXPECT_GT(check.in_shadow, 200) << "the shadow is on the wall";
+  EXPECT_EQ(check.wrong, 0) << "pixels darkened outside the analytic shadow, or left lit inside it";
+  EXPECT_LT(check.boundary, check.in_shadow / 2);
   EXPECT_GT(st.shadowed_real_pixels, 200);
   // and without shadows on real surfaces, the wall is untouched outside the box
   opt.real_shadows = false;
@@ -127,7 +146,7 @@ TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
     int n = 0;
     for (int y = 0; y < kH; ++y) {
       for (int x = 0; x < kW; ++x) {
-        if (segment_hits_box(glm::dvec3(wall_point(x, y)), glm::dvec3(light.position), glm::dvec3(lo), glm::dvec3(hi))) {
+        if (segment_hits_box(glm::dvec3(wall_point(x, y)), glm::dvec3(kLight.position), glm::dvec3(kBoxLo), glm::dvec3(kBoxHi))) {
           sum += glm::dvec3(x, y, 0);
           ++n;
         }
@@ -144,52 +163,21 @@ TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
 /// but only by the light its two faces on the way (in and out) hold back: T^2 of the light passes.
 TEST(Compositor, GlassBoxCastsALighterShadowOnTheRealWall) {
   const SensorFrame frame = wall_frame();
-  const glm::vec3 lo(0.05f, -0.25f, 1.3f), hi(0.25f, -0.05f, 1.5f);
   const VirtualMaterial glass{VirtualMaterial::kGlass, glm::vec3(0.9f, 0.8f, 0.7f), 1.5f};
   const float t = shadow_transmittance(glass);
   ASSERT_NEAR(t, (1.0f - 0.04f) * 0.8f, 1e-6f) << "Fresnel at normal incidence, mean tint";
   EXPECT_EQ(shadow_transmittance(VirtualMaterial{}), 0.0f) << "diffuse lets nothing through";
   core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
-  const auto tris = box(lo, hi);
+  const auto tris = box(kBoxLo, kBoxHi);
   const core::MeshHandle mesh = scene.add_rigid_mesh(tris);
   scene.set_mesh_transmittance(mesh, std::vector<float>(tris.size(), t));
   scene.add_instance(mesh, glm::mat4(1.0f));
   scene.commit();
-  CompositeOptions opt;
-  opt.ambient = 0.3f;
-  const VirtualLight light{{-0.4f, -0.5f, 0.3f}, {0.9f, 0.8f, 0.7f}};
-  opt.lights = {light};
-  opt.threads = 2;
-  const ColorImage out = composite(frame, scene, [&](const core::Hit&) { return glass; }, opt);
+  const ColorImage out = composite(frame, scene, [&](const core::Hit&) { return glass; }, shadow_options());
 
-  int checked = 0, lit_wrong = 0;
-  for (int y = 1; y + 1 < kH; ++y) {
-    for (int x = 1; x + 1 < kW; ++x) {
-      const glm::vec3 w = wall_point(x, y);
-      if (scene.intersect(core::Ray{glm::vec3(0.0f), w, 0.0f, 1.0f}).valid()) continue;
-      auto shadowed = [&](int xx, int yy) {
-        return segment_hits_box(glm::dvec3(wall_point(xx, yy)), glm::dvec3(light.position), glm::dvec3(lo), glm::dvec3(hi));
-      };
-      const bool s = shadowed(x, y);
-      if (s != shadowed(x - 1, y) || s != shadowed(x + 1, y) || s != shadowed(x, y - 1) || s != shadowed(x, y + 1)) continue;
-      const uint8_t* in = frame.color.at(x, y);
-      const uint8_t* o = out.at(x, y);
-      if (!s) {
-        lit_wrong += in[0] != o[0] || in[1] != o[1] || in[2] != o[2];
-        continue;
-      }
-      ++checked;
-      const float cosine = glm::normalize(light.position - w).z * -1.0f;
-      for (int c = 0; c < 3; ++c) {
-        const float factor = (opt.ambient + light.color[c] * cosine * t * t) / (opt.ambient + light.color[c] * cosine);
-        const int expected = core::linear_to_srgb8(core::srgb8_to_linear(in[c]) * factor);
-        EXPECT_NEAR(o[c], expected, 1) << x << "," << y << " channel " << c;
-      }
-      EXPECT_LT(o[0], in[0]) << "still a shadow";
-    }
-  }
-  EXPECT_GT(checked, 200) << "the shadow is on the wall";
-  EXPECT_EQ(lit_wrong, 0) << "pixels darkened outside the analytic shadow";
+  const WallShadow check = check_wall_shadow(frame, out, scene, t * t);
+  EXPECT_GT(check.in_shadow, 200) << "the shadow is on the wall";
+  EXPECT_EQ(check.wrong, 0) << "pixels darkened outside the analytic shadow, or left lit inside it";
 }
 
 TEST(Compositor, VirtualMirrorShowsTheRecordedWallThroughTheDepthMesh) {
