@@ -545,7 +545,6 @@ class Builder {
     build_small(out, child + 1, c.voxel_right, c.right, c.n_right, lists_right, size_right, depth + 1);
   }
 
-
   /// Nodes of at most this many triangles find their split without events: every bound of every
   /// triangle is a candidate, its counts taken over all the triangles (O(n^2), on arrays of
   /// positions the compiler vectorises). The same candidates, counts, costs and tie-breaks as
@@ -594,9 +593,9 @@ class Builder {
 
   static constexpr uint8_t kNone = 0xff;
 
-  /// A small node's triangles split between its children (and the children's voxels).
   static_assert(kSmall < kNone, "node-local numbers are bytes, kNone excluded");
 
+  /// A small node's triangles split between its children (and the children's voxels).
   struct Children {
     Aabb voxel_left, voxel_right;
     Item left[kSmall], right[kSmall];
