@@ -17,13 +17,27 @@
 
 namespace artrace::core {
 
+namespace {
+
+/// std::floor for floats, inline (on the x86-64 baseline std::floor is a call into libm, four a
+/// texture lookup). Exact: values of 2^23 and more (and NaN, infinities) are integers already.
+inline float floor_exact(float x) {
+  if (!(std::fabs(x) < 0x1p23f)) return x;
+  const float t = static_cast<float>(static_cast<int32_t>(x));  // towards zero
+  return t > x ? t - 1.0f : t;
+}
+
+}  // namespace
+
 glm::vec3 Texture::bilinear(glm::vec2 uv) const {
   if (width <= 0 || height <= 0) return glm::vec3(1.0f);
   // repeat: the fractional part, then texel centres at (i + 0.5) / width; v = 0 is the bottom row
-  const float u = uv.x - std::floor(uv.x), v = uv.y - std::floor(uv.y);
+  float u = uv.x - floor_exact(uv.x), v = uv.y - floor_exact(uv.y);
+  if (!(u >= 0.0f)) u = 0.0f;  // NaN or infinite coordinates: any texel, but one inside the image
+  if (!(v >= 0.0f)) v = 0.0f;
   const float x = u * static_cast<float>(width) - 0.5f;
   const float y = (1.0f - v) * static_cast<float>(height) - 0.5f;
-  const float fx = std::floor(x), fy = std::floor(y);
+  const float fx = floor_exact(x), fy = floor_exact(y);
   const float ax = x - fx, ay = y - fy;
   // fx in [-1, width - 1], fy in [-1, height]: neighbours wrap around without a division
   auto wrap = [](int i, int n) { return i < 0 ? i + n : (i >= n ? i - n : i); };
@@ -36,7 +50,22 @@ glm::vec3 Texture::bilinear(glm::vec2 uv) const {
 
 glm::vec3 Texture::sample(glm::vec2 uv, float lod) const {
   const int level = std::clamp(static_cast<int>(lod + 0.5f), 0, static_cast<int>(mips.size()));
+  return sample_level(uv, level);
+}
+
+glm::vec3 Texture::sample_level(glm::vec2 uv, int level) const {
+  level = std::clamp(level, 0, static_cast<int>(mips.size()));
   return level == 0 ? bilinear(uv) : mips[static_cast<size_t>(level - 1)].bilinear(uv);
+}
+
+int nearest_mip_level(float texels) {
+  if (!(texels > 1.0f)) return 0;  // also NaN
+  uint32_t bits;
+  std::memcpy(&bits, &texels, sizeof bits);
+  // texels = m 2^e with m in [1, 2): log2 rounds up where m > sqrt(2) (0x3504f3 is the mantissa
+  // of the float just below it; no float equals it)
+  const int e = static_cast<int>(bits >> 23) - 127;
+  return e + ((bits & 0x7fffffu) > 0x3504f3u ? 1 : 0);
 }
 
 void Texture::build_mipmaps() {
@@ -337,7 +366,7 @@ class WaveTracer {
       q.m = &material(h);
       const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
       const glm::vec3 tex = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size())
-                                ? s_.textures[texture].sample(info.uv, lod(r, h.t, info, s_.textures[texture]))
+                                ? s_.textures[texture].sample_level(info.uv, mip_level(r, h.t, info, s_.textures[texture]))
                                 : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
@@ -468,13 +497,12 @@ class WaveTracer {
     }
   }
 
-  /// Mip level: log2 of the texels a pixel's footprint covers at the hit (the footprint grows
-  /// with the path length; reflections and refractions are treated as flat).
-  float lod(const Pending& r, float t, const SurfaceInfo& info, const Texture& tex) const {
-    if (spread_ <= 0.0f || info.uv_per_world <= 0.0f) return 0.0f;
+  /// Mip level: the one nearest to log2 of the texels a pixel's footprint covers at the hit (the
+  /// footprint grows with the path length; reflections and refractions are treated as flat).
+  int mip_level(const Pending& r, float t, const SurfaceInfo& info, const Texture& tex) const {
+    if (spread_ <= 0.0f || info.uv_per_world <= 0.0f) return 0;
     const float footprint = spread_ * (r.dist + t * glm::length(r.ray.dir));
-    const float texels = footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height));
-    return texels > 1.0f ? std::log2(texels) : 0.0f;
+    return nearest_mip_level(footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height)));
   }
 
   static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,

@@ -464,5 +464,49 @@ TEST(Whitted, TexturesAreFilteredBilinearly) {
   expect_near(t.bilinear({1.25f, 0.5f}), glm::vec3(0.0f), 1e-6f, "repeats");
 }
 
+TEST(Whitted, TextureCoordinatesRepeatAtAnyMagnitude) {
+  Texture t;
+  t.width = 4;
+  t.height = 2;
+  for (int i = 0; i < 8; ++i) t.texels.push_back(glm::vec3(static_cast<float>(i)));
+  for (const float u : {0.1f, 0.37f, 0.5f, 0.875f}) {
+    for (const float v : {0.2f, 0.75f}) {
+      const glm::vec3 want = t.bilinear({u, v});
+      expect_near(t.bilinear({u - 1.0f, v}), want, 1e-4f, "one period to the left");
+      expect_near(t.bilinear({u + 3.0f, v - 2.0f}), want, 1e-4f, "periods away");
+      expect_near(t.bilinear({u - 4096.0f, v + 4096.0f}), want, 2e-3f, "far away");
+    }
+  }
+  // integers beyond 2^23 (and the largest float) are whole periods: u = 0, the edge between texel 3 and 0
+  expect_near(t.bilinear({0x1p24f, 0.75f}), t.bilinear({0.0f, 0.75f}), 0.0f, "2^24");
+  expect_near(t.bilinear({-3.0e38f, 0.75f}), t.bilinear({0.0f, 0.75f}), 0.0f, "-3e38");
+  // coordinates that are not numbers give a texel of the image, not a read outside it
+  for (const float bad : {std::nanf(""), INFINITY, -INFINITY}) {
+    const glm::vec3 c = t.bilinear({bad, bad});
+    EXPECT_TRUE(c.x >= 0.0f && c.x <= 7.0f) << c.x;
+  }
+}
+
+TEST(Whitted, NearestMipLevelIsLog2Rounded) {
+  EXPECT_EQ(nearest_mip_level(0.0f), 0);
+  EXPECT_EQ(nearest_mip_level(-5.0f), 0);
+  EXPECT_EQ(nearest_mip_level(std::nanf("")), 0);
+  EXPECT_EQ(nearest_mip_level(1.0f), 0);
+  EXPECT_EQ(nearest_mip_level(2.0f), 1);
+  EXPECT_EQ(nearest_mip_level(1024.0f), 10);
+  // either side of sqrt(2) 2^k, where log2 crosses k + 1/2
+  for (int k = 0; k < 20; ++k) {
+    const float edge = std::ldexp(1.41421356237f, k);
+    EXPECT_EQ(nearest_mip_level(std::nextafter(edge, 0.0f)), k) << k;
+    EXPECT_EQ(nearest_mip_level(std::nextafter(edge, INFINITY)), k + 1) << k;
+  }
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> exponent(0.0f, 30.0f);
+  for (int i = 0; i < 100000; ++i) {
+    const float x = std::exp2(exponent(rng));
+    EXPECT_EQ(nearest_mip_level(x), static_cast<int>(std::floor(std::log2(static_cast<double>(x)) + 0.5))) << x;
+  }
+}
+
 }  // namespace
 }  // namespace artrace::core

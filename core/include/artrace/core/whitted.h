@@ -37,9 +37,14 @@ struct Texture {
   glm::vec3 bilinear(glm::vec2 uv) const;
   /// Bilinear in the mip level nearest to `lod` (0: this level).
   glm::vec3 sample(glm::vec2 uv, float lod) const;
+  /// Bilinear in mip level `level` (clamped to the levels there are; 0: this level).
+  glm::vec3 sample_level(glm::vec2 uv, int level) const;
   /// Box-filtered halvings down to 1x1, so distant texture is averaged instead of aliased.
   void build_mipmaps();
 };
+
+/// The mip level nearest to log2(texels) for a footprint of `texels` texels (0 for at most one).
+int nearest_mip_level(float texels);
 
 struct Material {
   glm::vec3 ambient{0.0f};   ///< times the scene's ambient light
