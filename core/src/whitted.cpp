@@ -252,8 +252,8 @@ struct WaveLanes {
 
 /// One light's share of a wave: the lanes it reaches, what it adds there, the shadow rays.
 struct LightLanes {
-  glm::vec3 contrib[kPacketSize];
-  float trans[kPacketSize];
+  F4 contrib[2][3];  ///< per half and colour channel (0 where the light does not reach)
+  alignas(16) float trans[kPacketSize];
   RayPacket shadow;
   LaneMask lit = 0;
 };
@@ -337,6 +337,7 @@ class WaveTracer {
     (primary ? c_.primary : c_.secondary) += static_cast<uint64_t>(n);
 
     Point pt[kPacketSize];
+    glm::vec3 ambient[kPacketSize];  ///< what each hit reflects of the ambient light
     LaneMask hit_mask = 0;
     for (int i = 0; i < n; ++i) {
       const Pending& r = rays[i];
@@ -370,7 +371,7 @@ class WaveTracer {
                                 : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
-      color[r.lane] += r.weight * s_.ambient * q.m->ambient * tex;
+      ambient[i] = s_.ambient * q.m->ambient * tex;
     }
     if (hit_mask == 0) return;
 
@@ -388,11 +389,21 @@ class WaveTracer {
       }
       c_.shadow_ticks += ticks_since(s0);
     }
+    // the lights' sums side by side, then each hit's radiance into its pixel
+    F4 direct[2][3] = {};
     for (size_t li = 0; li < light_count; ++li) {
       const LightLanes& ll = light_lanes_[li];
-      for (int i = 0; i < n; ++i) {
-        if ((ll.lit >> i) & 1u) color[rays[i].lane] += rays[i].weight * ll.contrib[i] * ll.trans[i];
+      if (!ll.lit) continue;
+      for (int h = 0; h < 2; ++h) {
+        F4 trans;
+        std::memcpy(&trans, &ll.trans[4 * h], sizeof(F4));
+        for (int a = 0; a < 3; ++a) direct[h][a] += ll.contrib[h][a] * trans;
       }
+    }
+    for (int i = 0; i < n; ++i) {
+      if (!((hit_mask >> i) & 1u)) continue;
+      const int h = i >> 2, k = i & 3;
+      color[rays[i].lane] += rays[i].weight * (ambient[i] + glm::vec3(direct[h][0][k], direct[h][1][k], direct[h][2][k]));
     }
 
     // reflection and refraction rays for the next wave
@@ -427,6 +438,8 @@ class WaveTracer {
   void light_lanes(const WaveLanes& w, const PointLight& light, LightLanes& ll) const {
     ll.lit = 0;
     for (int h = 0; h < 2; ++h) {
+      for (int a = 0; a < 3; ++a) ll.contrib[h][a] = F4{};
+      for (int k = 0; k < 4; ++k) ll.trans[4 * h + k] = 1.0f;  // the shadow rays may lower it
       F4 to[3];
       for (int a = 0; a < 3; ++a) to[a] = light.position[a] - w.p[h][a];
       F4 dist = (to[0] * to[0] + to[1] * to[1]) + to[2] * to[2];
@@ -454,11 +467,7 @@ class WaveTracer {
         const float f = std::pow(rv[k], w.shine[4 * h + k]);
         for (int a = 0; a < 3; ++a) c[a][k] += w.specular[h][a][k] * f;
       }
-      for (int a = 0; a < 3; ++a) c[a] *= light.color[a];
-      for (int k = 0; k < 4; ++k) {
-        ll.contrib[4 * h + k] = glm::vec3(c[0][k], c[1][k], c[2][k]);
-        ll.trans[4 * h + k] = 1.0f;
-      }
+      for (int a = 0; a < 3; ++a) ll.contrib[h][a] = (F4)((M4)(c[a] * light.color[a]) & ok);
       if (!has_shadows(o_.mode)) continue;
       F4 back[3];
       for (int a = 0; a < 3; ++a) back[a] = light.position[a] - w.org[h][a];
