@@ -449,10 +449,8 @@ class WaveTracer {
       const F4 ndl = (w.ns[h][0] * l[0] + w.ns[h][1] * l[1]) + w.ns[h][2] * l[2];
       const F4 ngl = (w.ng[h][0] * l[0] + w.ng[h][1] * l[1]) + w.ng[h][2] * l[2];
       const F4 zero = {};
-      const M4 ok = w.hit[h] & (dist > zero) & (ndl > zero) & (ngl > zero);
-      const uint32_t lit = bits4(ok);
-      if (!lit) continue;
-      ll.lit |= lit << (4 * h);
+      M4 ok = w.hit[h] & (dist > zero) & (ndl > zero) & (ngl > zero);
+      if (!bits4(ok)) continue;
       F4 c[3];
       for (int a = 0; a < 3; ++a) c[a] = w.diffuse[h][a] * ndl;
       // Phong highlight: rv = (2 (n.l) n - l) . view, above the material's cut-off
@@ -467,7 +465,14 @@ class WaveTracer {
         const float f = std::pow(rv[k], w.shine[4 * h + k]);
         for (int a = 0; a < 3; ++a) c[a][k] += w.specular[h][a][k] * f;
       }
-      for (int a = 0; a < 3; ++a) ll.contrib[h][a] = (F4)((M4)(c[a] * light.color[a]) & ok);
+      for (int a = 0; a < 3; ++a) c[a] *= light.color[a];
+      // a lane the light adds nothing to (a black diffuse colour or texel, no highlight) needs no
+      // shadow ray either
+      ok &= (c[0] != zero) | (c[1] != zero) | (c[2] != zero);
+      const uint32_t lit = bits4(ok);
+      if (!lit) continue;
+      ll.lit |= lit << (4 * h);
+      for (int a = 0; a < 3; ++a) ll.contrib[h][a] = (F4)((M4)c[a] & ok);
       if (!has_shadows(o_.mode)) continue;
       F4 back[3];
       for (int a = 0; a < 3; ++a) back[a] = light.position[a] - w.org[h][a];

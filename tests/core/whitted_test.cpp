@@ -205,6 +205,50 @@ TEST(Whitted, ShadowsThroughGlassAreTheSameWalkedOrInOneTraversal) {
   EXPECT_GT(tinted, a.pixels.size() / 20);
 }
 
+TEST(Whitted, NoShadowRayWhereTheLightAddsNothing) {
+  // a black tile (no highlight) beside a grey one, seen from above, one light over the middle
+  TestScene s;
+  const uint32_t black = s.add_material(diffuse(glm::vec3(0.0f), glm::vec3(0.3f)));
+  const uint32_t grey = s.add_material(diffuse(glm::vec3(0.5f)));
+  s.square_z(-1.0f, 0.0f, 0.0f, 1.0f, black);
+  s.square_z(1.0f, 0.0f, 0.0f, 1.0f, grey);
+  s.shading.ambient = glm::vec3(1.0f);
+  s.shading.lights = {{{0.0f, 0.0f, 3.0f}, {1.0f, 1.0f, 1.0f}}};
+  s.commit();
+  const Camera cam = Camera::look_at({0.0f, 0.0f, 4.0f}, {0.0f, 0.0f, 0.0f}, {0, 1, 0}, 60.0f, 40, 24);
+  int on_grey = 0, on_black = 0;
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const Hit h = s.geometry.intersect(cam.ray(x + 0.5f, y + 0.5f));
+      if (h.valid()) ++(s.mat[h.prim] == grey ? on_grey : on_black);
+    }
+  }
+  ASSERT_GT(on_grey, 50);
+  ASSERT_GT(on_black, 50);
+  WhittedOptions o;
+  o.mode = ShadingMode::kShadows;
+  WhittedStats st;
+  const Image shadows = render_whitted(s.shading, cam, o, &st);
+  EXPECT_EQ(st.shadow_rays, static_cast<uint64_t>(on_grey)) << "one shadow ray for each grey pixel, none for the black";
+  o.mode = ShadingMode::kDiffuse;
+  const Image plain = render_whitted(s.shading, cam, o);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) EXPECT_EQ(shadows.at(x, y), plain.at(x, y)) << x << "," << y;
+  }
+
+  // a highlight on black is light the shadow ray still decides: under an occluder it goes
+  Material shiny = diffuse(glm::vec3(0.0f), glm::vec3(0.3f));
+  shiny.specular = glm::vec3(0.5f);
+  shiny.shine = 4.0f;
+  s.shading.materials[black] = shiny;
+  const glm::vec3 eye{-1.0f, 0.0f, 2.0f}, down{0.0f, 0.0f, -1.0f};  // straight down on (-1, 0, 0)
+  const glm::vec3 lit = s.trace(eye, down, ShadingMode::kShadows);
+  EXPECT_GT(lit.x, 0.3f + 1e-3f) << "the highlight without an occluder";
+  s.square_z(-0.5f, 0.0f, 1.5f, 0.2f, grey, false);  // between (-1, 0, 0) and the light
+  s.commit();
+  expect_near(s.trace(eye, down, ShadingMode::kShadows), glm::vec3(0.3f), 1e-6f, "the highlight in shadow");
+}
+
 TEST(Whitted, MirrorReflectsAKnownColour) {
   TestScene s;
   Material mirror;
