@@ -31,12 +31,12 @@ using core::LaneMask;
 using core::RayPacket;
 using Clock = std::chrono::steady_clock;
 
-/// A batch of packets in tile order: packets [8 i, 8 i + 8) are the 4x2 blocks of tile i.
+/// A batch of packets in tile order: packets [k i, k i + k) are the blocks of tile i (k = 64 /
+/// lanes: 4x2 blocks for 8-ray packets, 4x4 for 16).
 struct Workload {
   std::vector<RayPacket> packets;
   std::vector<LaneMask> masks;
   size_t rays = 0;
-  size_t tiles() const { return (packets.size() + 7) / 8; }
 };
 
 void count_rays(Workload& w) {
@@ -44,17 +44,19 @@ void count_rays(Workload& w) {
   for (const LaneMask m : w.masks) w.rays += static_cast<size_t>(__builtin_popcount(m));
 }
 
-Workload primary_rays(const core::Camera& cam) {
+/// Camera packets of `lanes` rays (8 or 16: 4 x lanes / 4 pixels), in tile order.
+Workload primary_rays(const core::Camera& cam, int lanes) {
   Workload w;
+  const int rows = lanes / 4;
   const int tiles_x = (cam.width + 7) / 8, tiles_y = (cam.height + 7) / 8;
   for (int ty = 0; ty < tiles_y; ++ty) {
     for (int tx = 0; tx < tiles_x; ++tx) {
-      for (int by = 0; by < 4; ++by) {
+      for (int by = 0; by < 8 / rows; ++by) {
         for (int bx = 0; bx < 2; ++bx) {
           RayPacket p;
-          const int x = tx * 8 + bx * 4, y = ty * 8 + by * 2;
+          const int x = tx * 8 + bx * 4, y = ty * 8 + by * rows;
           LaneMask m = 0;
-          if (x < cam.width && y < cam.height) m = core::primary_packet(cam, x, y, p);
+          if (x < cam.width && y < cam.height) m = core::primary_packet(cam, x, y, p, rows);
           w.packets.push_back(p);
           w.masks.push_back(m);
         }
@@ -119,7 +121,7 @@ double paired_ratio(int runs, const Ours& ours, const Theirs& theirs) {
 }
 
 /// Secondary workloads built from the primary hits: shadow packets towards each light (the lanes
-/// of one 4x2 block share the light), and one cosine-distributed bounce per hit (fixed seed).
+/// of one block share the light), and one cosine-distributed bounce per hit (fixed seed).
 void secondary_rays(const core::KdTree& tree, const Workload& primary, const std::vector<HitPacket>& hits,
                     const std::vector<glm::vec3>& lights, Workload& shadow, Workload& bounce) {
   std::mt19937 rng(12345);
@@ -179,6 +181,7 @@ struct Options {
   std::string scene, json, reference = "none", simd = "auto";
   double time = 0.0;
   int width = 512, height = 400, threads = 0, runs = 7, subdivide = 0, verify_rays = 1000;
+  int lanes = 8;  ///< rays a packet: 8 (4x2 pixels, against Embree's 8-wide calls) or 16 (4x4, its 16-wide ones)
   core::KdTreeBuildOptions build;
 };
 
@@ -200,6 +203,7 @@ void run(const Options& opt) {
   out["threads"] = threads;
   out["runs"] = opt.runs;
   out["simd"] = core::to_string(core::simd_level());
+  out["lanes"] = opt.lanes;
   out["subdivide"] = opt.subdivide;
   out["triangles"] = tris.size();
 
@@ -212,7 +216,9 @@ void run(const Options& opt) {
                    {"build_ns_per_triangle", build_ms * 1e6 / std::max<size_t>(1, tris.size())},
                    {"binned_above", opt.build.binned_above}};
 
-  Workload primary = primary_rays(cam);
+  Workload primary = primary_rays(cam, opt.lanes);
+  const size_t per_tile = static_cast<size_t>(64 / opt.lanes);  // packets a tile
+  const size_t tiles = (primary.packets.size() + per_tile - 1) / per_tile;
   std::vector<HitPacket> hits(primary.packets.size());
   for (size_t p = 0; p < primary.packets.size(); ++p) tree.intersect(primary.packets[p], primary.masks[p], hits[p]);
 
@@ -247,26 +253,26 @@ void run(const Options& opt) {
 
   std::vector<HitPacket> scratch(primary.packets.size());
   auto mrays = [](size_t rays, double ms) { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; };
-  auto pass = [&](const Workload& w, size_t per_tile, auto fn) {
-    return tile_pass(arena, primary.tiles(), w.packets.size(), per_tile, fn);
+  auto pass = [&](const Workload& w, size_t w_per_tile, auto fn) {  // w_per_tile: this workload's packets a tile
+    return tile_pass(arena, tiles, w.packets.size(), w_per_tile, fn);
   };
   auto single_rays = [&](const Workload& w) {
-    return pass(w, 8, [&, &w = w](size_t p) {
+    return pass(w, per_tile, [&, &w = w](size_t p) {
       for (int i = 0; i < kPacketSize; ++i) {
         if ((w.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(w.packets[p].get(i)).prim;
       }
     });
   };
   const double single_ms = median_ms(opt.runs, single_rays(primary));
-  const auto packet_pass = pass(primary, 8, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
+  const auto packet_pass = pass(primary, per_tile, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
   const double packet_ms = median_ms(opt.runs, packet_pass);
-  const size_t per_tile_shadow = 8 * std::max<size_t>(1, lights.size());
+  const size_t per_tile_shadow = per_tile * std::max<size_t>(1, lights.size());
   std::vector<LaneMask> blocked(shadow.packets.size());
   const auto shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
   const double shadow_ms = median_ms(opt.runs, shadow_pass);
   // the same packets with a last-occluder hint per light and tile, as the renderer traces them
   auto hinted_pass = [&] {
-    parallel_tiles(arena, primary.tiles(), [&](size_t t) {
+    parallel_tiles(arena, tiles, [&](size_t t) {
       std::vector<core::ShadowHint> hints(std::max<size_t>(1, lights.size()));
       for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
         const LaneMask b = tree.occluded(shadow.packets[p], shadow.masks[p], &hints[p % hints.size()]);
@@ -291,7 +297,7 @@ void run(const Options& opt) {
     size_t agree = 0;
     for (size_t p = 0; p < primary.packets.size(); ++p) {
       uint32_t prim[kPacketSize];
-      ref.intersect8(primary.packets[p], primary.masks[p], prim);
+      ref.intersect_packet(primary.packets[p], primary.masks[p], prim, opt.lanes);
       for (int i = 0; i < kPacketSize; ++i) {
         if ((primary.masks[p] >> i) & 1u) agree += prim[i] == hits[p].prim[i];
       }
@@ -299,15 +305,15 @@ void run(const Options& opt) {
     e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
     std::vector<uint32_t> sink(primary.packets.size() * kPacketSize);
     auto embree_single = [&](const Workload& w) {
-      return pass(w, 8, [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
+      return pass(w, per_tile, [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
     };
     e["rays"]["primary_single"] = mrays(primary.rays, median_ms(opt.runs, embree_single(primary)));
-    const auto embree_packet_pass = pass(primary, 8, [&](size_t p) {
-      ref.intersect8(primary.packets[p], primary.masks[p], &sink[p * kPacketSize]);
+    const auto embree_packet_pass = pass(primary, per_tile, [&](size_t p) {
+      ref.intersect_packet(primary.packets[p], primary.masks[p], &sink[p * kPacketSize], opt.lanes);
     });
     std::vector<LaneMask> embree_blocked(shadow.packets.size());
     const auto embree_shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) {
-      embree_blocked[p] = ref.occluded8(shadow.packets[p], shadow.masks[p]);
+      embree_blocked[p] = ref.occluded_packet(shadow.packets[p], shadow.masks[p], opt.lanes);
     });
     e["rays"]["primary_packet"] = mrays(primary.rays, median_ms(opt.runs, embree_packet_pass));
     e["rays"]["shadow"] = mrays(shadow.rays, median_ms(opt.runs, embree_shadow_pass));
@@ -339,9 +345,9 @@ void run(const Options& opt) {
 #endif
   }
 
-  std::printf("bench-core %s t=%g %dx%d, %d threads, %s kernels, %zu triangles (median of %d runs)\n",
+  std::printf("bench-core %s t=%g %dx%d, %d threads, %s kernels, packets of %d rays, %zu triangles (median of %d runs)\n",
               opt.scene.c_str(), opt.time, opt.width, opt.height, threads, core::to_string(core::simd_level()).c_str(),
-              tris.size(), opt.runs);
+              opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
               st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
   std::printf("  %-16s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
@@ -382,7 +388,10 @@ void add_bench_core_command(CLI::App& app) {
   cmd->add_option("--verify-rays", opt->verify_rays, "primary rays checked against brute force")->capture_default_str();
   cmd->add_option("--reference", opt->reference, "also time the same rays with: none, embree")
       ->capture_default_str()->check(CLI::IsMember({"none", "embree"}));
-  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2")->capture_default_str();
+  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
+  cmd->add_option("--lanes", opt->lanes, "rays a packet: 8 (4x2 pixels; Embree's 8-wide calls) or 16 (4x4; its 16-wide ones)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--json", opt->json, "write the results as JSON");
   cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str();
   cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str();

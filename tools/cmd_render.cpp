@@ -26,7 +26,7 @@ void add_render_command(CLI::App& app) {
   cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(1, 16384));
   cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(1, 16384));
   cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2")->capture_default_str();
+  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
   cmd->add_flag("--single", opt->single, "trace single rays instead of packets");
   cmd->callback([opt] {
     core::set_simd_level(core::parse_simd_level(opt->simd));

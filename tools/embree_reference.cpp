@@ -8,9 +8,29 @@
 namespace artrace::tools {
 namespace {
 
-/// Copies the packet's lanes into Embree's 8-wide ray layout; `valid` marks the lanes of `mask`.
-void fill_ray8(const core::RayPacket& rays, core::LaneMask mask, RTCRay8& r, int* valid) {
-  for (int i = 0; i < 8; ++i) {
+/// Embree's ray layouts and packet calls of width N.
+template <int N>
+struct Width;
+template <>
+struct Width<8> {
+  using Ray = RTCRay8;
+  using RayHit = RTCRayHit8;
+  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect8(valid, s, c, rh); }
+  static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded8(valid, s, c, r); }
+};
+template <>
+struct Width<16> {
+  using Ray = RTCRay16;
+  using RayHit = RTCRayHit16;
+  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect16(valid, s, c, rh); }
+  static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded16(valid, s, c, r); }
+};
+
+/// Copies lanes [0, N) of the packet into Embree's N-wide ray layout; `valid` marks the lanes of `mask`.
+template <int N, class R>
+void fill_ray(const core::RayPacket& rays, core::LaneMask mask, R& r, int* valid) {
+  static_assert(N <= core::kPacketSize, "an Embree packet is at most one of ours");
+  for (int i = 0; i < N; ++i) {
     valid[i] = ((mask >> i) & 1u) ? -1 : 0;
     r.org_x[i] = rays.org[0][i];
     r.org_y[i] = rays.org[1][i];
@@ -25,6 +45,35 @@ void fill_ray8(const core::RayPacket& rays, core::LaneMask mask, RTCRay8& r, int
     r.id[i] = static_cast<unsigned>(i);
     r.flags[i] = 0;
   }
+}
+
+template <int N>
+void intersect_n(RTCScene scene, const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  alignas(64) int valid[N];
+  alignas(64) typename Width<N>::RayHit rh;
+  fill_ray<N>(rays, mask, rh.ray, valid);
+  for (int i = 0; i < N; ++i) rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+  Width<N>::intersect(valid, scene, &ctx, &rh);
+  for (int i = 0; i < N; ++i) {
+    if ((mask >> i) & 1u) prim[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? core::kInvalidId : rh.hit.primID[i];
+  }
+}
+
+template <int N>
+core::LaneMask occluded_n(RTCScene scene, const core::RayPacket& rays, core::LaneMask mask) {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  alignas(64) int valid[N];
+  alignas(64) typename Width<N>::Ray r;
+  fill_ray<N>(rays, mask, r, valid);
+  Width<N>::occluded(valid, scene, &ctx, &r);
+  core::LaneMask blocked = 0;
+  for (int i = 0; i < N; ++i) {
+    if (((mask >> i) & 1u) && r.tfar[i] < 0.0f) blocked |= 1u << i;
+  }
+  return blocked;
 }
 
 }  // namespace
@@ -83,31 +132,17 @@ void EmbreeReference::intersect1(const core::RayPacket& rays, core::LaneMask mas
   }
 }
 
-void EmbreeReference::intersect8(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  alignas(32) int valid[8];
-  alignas(32) RTCRayHit8 rh;
-  fill_ray8(rays, mask, rh.ray, valid);
-  for (int i = 0; i < 8; ++i) rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect8(valid, scene_, &ctx, &rh);
-  for (int i = 0; i < 8; ++i) {
-    if ((mask >> i) & 1u) prim[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? core::kInvalidId : rh.hit.primID[i];
+void EmbreeReference::intersect_packet(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim,
+                                       int width) const {
+  if (width == 16) {
+    intersect_n<16>(scene_, rays, mask, prim);
+  } else {
+    intersect_n<8>(scene_, rays, mask & 0xffu, prim);
   }
 }
 
-core::LaneMask EmbreeReference::occluded8(const core::RayPacket& rays, core::LaneMask mask) const {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  alignas(32) int valid[8];
-  alignas(32) RTCRay8 r;
-  fill_ray8(rays, mask, r, valid);
-  rtcOccluded8(valid, scene_, &ctx, &r);
-  core::LaneMask blocked = 0;
-  for (int i = 0; i < 8; ++i) {
-    if (((mask >> i) & 1u) && r.tfar[i] < 0.0f) blocked |= 1u << i;
-  }
-  return blocked;
+core::LaneMask EmbreeReference::occluded_packet(const core::RayPacket& rays, core::LaneMask mask, int width) const {
+  return width == 16 ? occluded_n<16>(scene_, rays, mask) : occluded_n<8>(scene_, rays, mask & 0xffu);
 }
 
 }  // namespace artrace::tools

@@ -20,8 +20,10 @@ class EmbreeReference {
   /// (Re)builds the scene with RTC_BUILD_QUALITY_HIGH.
   void build();
   void intersect1(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const;
-  void intersect8(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const;
-  core::LaneMask occluded8(const core::RayPacket& rays, core::LaneMask mask) const;
+  /// rtcIntersect8 / rtcIntersect16 (`width` 8 or 16) on lanes [0, width) of the packet.
+  void intersect_packet(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim, int width) const;
+  /// rtcOccluded8 / rtcOccluded16 likewise; returns the blocked lanes.
+  core::LaneMask occluded_packet(const core::RayPacket& rays, core::LaneMask mask, int width) const;
 
  private:
   const std::vector<core::Triangle>& tris_;

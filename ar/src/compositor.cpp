@@ -391,7 +391,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   core::for_each_tile(rw, rh, opt.threads, [&](const core::Tile& t) {
     core::RayPacket rays;
     core::HitPacket hits;
-    for (int y = t.y0; y < t.y1; y += 2) {
+    for (int y = t.y0; y < t.y1; y += core::kPacketRows) {
       for (int x = t.x0; x < t.x1; x += 4) {
         core::LaneMask mask = 0;
         for (int i = 0; i < core::kPacketSize; ++i) {

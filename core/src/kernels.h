@@ -37,10 +37,10 @@ namespace sse {
 Hit intersect_single(const KdTreeView& tree, const Ray& ray);
 bool occluded_single(const KdTreeView& tree, const Ray& ray);
 bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t prim, Hit& hit);
-/// Packets of 8 as two 4-wide halves.
+/// Packets as 4-wide quarters.
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
-/// The portable fallback: the 8 lanes one after the other with the width-1 kernel.
+/// The portable fallback: the lanes one after the other with the width-1 kernel.
 void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask occluded_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
 
@@ -68,7 +68,7 @@ LaneMask two_level_transmittance_packet_scalar(const TwoLevelView& scene, const 
 }  // namespace sse
 
 namespace avx2 {
-/// Packets of 8 in one 8-wide pass; call only when the CPU has AVX2.
+/// Packets as two 8-wide halves; call only when the CPU has AVX2.
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
@@ -78,6 +78,19 @@ LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& r
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
 LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
 }  // namespace avx2
+
+namespace avx512 {
+/// Packets of 16 in one 16-wide pass (8 wide when lanes 8-15 are masked out); call only when the
+/// CPU has AVX-512 F, VL, DQ and BW.
+void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
+void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
+void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
+LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
+}  // namespace avx512
 
 /// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
 struct PacketKernels {

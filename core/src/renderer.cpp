@@ -25,11 +25,11 @@ void for_each_tile(int width, int height, int threads, const std::function<void(
   });
 }
 
-LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays) {
+LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays, int rows) {
   LaneMask mask = 0;
   for (int i = 0; i < kPacketSize; ++i) {
     const int px = x + i % 4, py = y + i / 4;
-    const bool inside = px < cam.width && py < cam.height;
+    const bool inside = px < cam.width && py < cam.height && i < 4 * rows;
     rays.set(i, cam.ray(static_cast<float>(px) + 0.5f, static_cast<float>(py) + 0.5f));
     if (inside) mask |= 1u << i;
   }

@@ -15,13 +15,29 @@ bool cpu_has_avx2() {
 #endif
 }
 
+bool cpu_has_avx512() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+         __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw");
+#else
+  return false;
+#endif
+}
+
 SimdLevel resolve(SimdLevel level) {
-  if (level == SimdLevel::kAuto) return cpu_has_avx2() ? SimdLevel::kAvx2 : SimdLevel::kSse;
+  if (level == SimdLevel::kAuto) {
+    return cpu_has_avx512() ? SimdLevel::kAvx512 : cpu_has_avx2() ? SimdLevel::kAvx2 : SimdLevel::kSse;
+  }
   return level;
 }
 
 PacketKernels kernels_for(SimdLevel level) {
   switch (level) {
+    case SimdLevel::kAvx512:
+      return {&avx512::intersect_packet, &avx512::occluded_packet, &avx512::bvh_intersect_packet,
+              &avx512::bvh_occluded_packet, &avx512::two_level_intersect_packet, &avx512::two_level_occluded_packet,
+              &avx512::transmittance_packet, &avx512::two_level_transmittance_packet};
     case SimdLevel::kAvx2:
       return {&avx2::intersect_packet, &avx2::occluded_packet, &avx2::bvh_intersect_packet,
               &avx2::bvh_occluded_packet, &avx2::two_level_intersect_packet, &avx2::two_level_occluded_packet,
@@ -44,12 +60,15 @@ PacketKernels g_kernels = kernels_for(g_level);
 }  // namespace
 
 bool simd_level_supported(SimdLevel level) {
+  if (level == SimdLevel::kAvx512) return cpu_has_avx512();
   return level != SimdLevel::kAvx2 || cpu_has_avx2();
 }
 
 void set_simd_level(SimdLevel level) {
   if (!simd_level_supported(level)) {
-    throw std::invalid_argument("this CPU has no AVX2: choose 'sse' or 'scalar'");
+    throw std::invalid_argument(level == SimdLevel::kAvx512
+                                    ? "this CPU has no AVX-512 (F, VL, DQ, BW): choose 'avx2', 'sse' or 'scalar'"
+                                    : "this CPU has no AVX2: choose 'sse' or 'scalar'");
   }
   g_level = resolve(level);
   g_kernels = kernels_for(g_level);
@@ -65,6 +84,7 @@ std::string to_string(SimdLevel level) {
     case SimdLevel::kScalar: return "scalar";
     case SimdLevel::kSse: return "sse";
     case SimdLevel::kAvx2: return "avx2";
+    case SimdLevel::kAvx512: return "avx512";
   }
   return "?";
 }
@@ -74,7 +94,8 @@ SimdLevel parse_simd_level(const std::string& name) {
   if (name == "scalar") return SimdLevel::kScalar;
   if (name == "sse") return SimdLevel::kSse;
   if (name == "avx2") return SimdLevel::kAvx2;
-  throw std::invalid_argument("unknown SIMD level '" + name + "' (expected auto, scalar, sse or avx2)");
+  if (name == "avx512") return SimdLevel::kAvx512;
+  throw std::invalid_argument("unknown SIMD level '" + name + "' (expected auto, scalar, sse, avx2 or avx512)");
 }
 
 }  // namespace artrace::core

@@ -1,4 +1,4 @@
-// 8-wide kernels. This file alone is compiled with -mavx2 -mfma (FMA contraction stays off, so
+// 8-wide kernels (a packet as two halves). This file alone is compiled with -mavx2 -mfma (FMA contraction stays off, so
 // its hits match the other widths bit for bit); it is reached only through simd_dispatch.cpp after
 // the CPU reported AVX2.
 #include "kernels.h"
@@ -15,36 +15,44 @@ namespace artrace::core::avx2 {
 #include "traversal.inc"
 
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (mask) trace_lanes<8, false>(tree, rays, 0, mask, &hits);
+  in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_lanes<8, false>(tree, rays, off, bits, &hits); });
 }
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
-  return mask ? trace_lanes<8, true>(tree, rays, 0, mask, nullptr) : 0u;
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_lanes<8, true>(tree, rays, off, bits, nullptr); });
 }
 
 
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (mask) trace_bvh_packet<8, false>(bvh, rays, 0, mask, &hits);
+  in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<8, false>(bvh, rays, off, bits, &hits); });
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  return mask ? trace_bvh_packet<8, true>(bvh, rays, 0, mask, nullptr) : 0u;
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<8, true>(bvh, rays, off, bits, nullptr); });
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (mask) trace_two_level_packet<8, false>(scene, rays, 0, mask, &hits);
+  in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<8, false>(scene, rays, off, bits, &hits);
+  });
 }
 
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
-  return mask ? trace_two_level_packet<8, true>(scene, rays, 0, mask, nullptr) : 0u;
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<8, true>(scene, rays, off, bits, nullptr);
+  });
 }
 
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
-  return mask ? trace_lanes<8, true, true>(tree, rays, 0, mask, nullptr, trans) : 0u;
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_lanes<8, true, true>(tree, rays, off, bits, nullptr, trans);
+  });
 }
 
 LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
-  return mask ? trace_two_level_packet<8, true, true>(scene, rays, 0, mask, nullptr, trans) : 0u;
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<8, true, true>(scene, rays, off, bits, nullptr, trans);
+  });
 }
 
 }  // namespace artrace::core::avx2

@@ -16,15 +16,6 @@ namespace artrace::core::sse {
 
 namespace {
 
-/// SSE traces a packet of 8 as two halves of 4; `trace(offset, bits)` returns blocked lanes.
-template <class Trace>
-LaneMask in_halves(LaneMask mask, const Trace& trace) {
-  LaneMask blocked = 0;
-  if (mask & 0x0fu) blocked |= trace(0, mask & 0x0fu);
-  if (mask & 0xf0u) blocked |= trace(4, (mask >> 4) & 0x0fu) << 4;
-  return blocked;
-}
-
 /// The portable fallback: lane after lane with a single-ray function that updates a Hit.
 template <class Single>
 void lane_by_lane(const RayPacket& rays, LaneMask mask, HitPacket& hits, const Single& single) {
@@ -73,11 +64,11 @@ bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t pri
 }
 
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  in_halves(mask, [&](int off, uint32_t bits) { return trace_lanes<4, false>(tree, rays, off, bits, &hits); });
+  in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, false>(tree, rays, off, bits, &hits); });
 }
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
-  return in_halves(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true>(tree, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true>(tree, rays, off, bits, nullptr); });
 }
 
 void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -124,11 +115,11 @@ Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray) { return to_hit(bvh
 bool bvh_occluded_single(const BvhView& bvh, const Ray& ray) { return bvh_single<true>(bvh, ray).done != 0; }
 
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  in_halves(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, false>(bvh, rays, off, bits, &hits); });
+  in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, false>(bvh, rays, off, bits, &hits); });
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  return in_halves(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, true>(bvh, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, true>(bvh, rays, off, bits, nullptr); });
 }
 
 void bvh_intersect_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -148,11 +139,11 @@ bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray) {
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  in_halves(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, false>(scene, rays, off, bits, &hits); });
+  in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, false>(scene, rays, off, bits, &hits); });
 }
 
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
-  return in_halves(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, true>(scene, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, true>(scene, rays, off, bits, nullptr); });
 }
 
 void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -166,11 +157,11 @@ LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPa
 // ---- transmittance
 
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
-  return in_halves(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true, true>(tree, rays, off, bits, nullptr, trans); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true, true>(tree, rays, off, bits, nullptr, trans); });
 }
 
 LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
-  return in_halves(mask, [&](int off, uint32_t bits) {
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) {
     return trace_two_level_packet<4, true, true>(scene, rays, off, bits, nullptr, trans);
   });
 }

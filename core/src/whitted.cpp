@@ -192,11 +192,12 @@ inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std:
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
 // The light loop works on four lanes side by side (GCC vector extensions: one SSE register on the
-// x86-64 baseline), a wave of 8 as two halves. Every lane computes with the same operations, in
+// x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes with the same operations, in
 // the same order, as scalar code would, so the result does not depend on the grouping.
 typedef float F4 __attribute__((vector_size(16)));
 typedef int32_t M4 __attribute__((vector_size(16)));
-static_assert(kPacketSize == 8, "the light loop works on a wave of 8 as two halves");
+static_assert(kPacketSize % 4 == 0, "the light loop works on a wave in quarters of 4 lanes");
+constexpr int kQuarters = kPacketSize / 4;
 
 /// Square roots in place.
 inline void sqrt4(F4& x) {
@@ -218,17 +219,18 @@ inline uint32_t bits4(M4 m) {
 #endif
 }
 
-/// The shaded hits of a wave as structure of arrays (two halves of 4), for the light loop.
+/// The shaded hits of a wave as structure of arrays (quarters of 4 lanes), for the light loop.
 struct WaveLanes {
-  F4 p[2][3], ng[2][3], ns[2][3], view[2][3], diffuse[2][3], specular[2][3], org[2][3];
-  F4 min_cos[2];         ///< highlight cut-off cosine (2: none)
-  M4 hit[2], highlight[2];  ///< lanes with a hit; lanes whose material has a highlight
-  float shine[8];
+  F4 p[kQuarters][3], ng[kQuarters][3], ns[kQuarters][3], view[kQuarters][3], diffuse[kQuarters][3],
+      specular[kQuarters][3], org[kQuarters][3];
+  F4 min_cos[kQuarters];                    ///< highlight cut-off cosine (2: none)
+  M4 hit[kQuarters], highlight[kQuarters];  ///< lanes with a hit; lanes whose material has a highlight
+  float shine[kPacketSize];
 
   /// `origins`: also the shadow rays' origins (only when shadows are traced).
   void gather(const Point* pt, LaneMask hit_mask, const std::vector<float>& highlight_cos, const Material* materials,
               bool origins) {
-    for (int i = 0; i < 8; ++i) {
+    for (int i = 0; i < kPacketSize; ++i) {
       const int h = i >> 2, k = i & 3;
       const Point* q = ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
       const glm::vec3 o = q && origins ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
@@ -252,7 +254,7 @@ struct WaveLanes {
 
 /// One light's share of a wave: the lanes it reaches, what it adds there, the shadow rays.
 struct LightLanes {
-  F4 contrib[2][3];  ///< per half and colour channel (0 where the light does not reach)
+  F4 contrib[kQuarters][3];  ///< per quarter and colour channel (0 where the light does not reach)
   alignas(16) float trans[kPacketSize];
   RayPacket shadow;
   LaneMask lit = 0;
@@ -390,11 +392,11 @@ class WaveTracer {
       c_.shadow_ticks += ticks_since(s0);
     }
     // the lights' sums side by side, then each hit's radiance into its pixel
-    F4 direct[2][3] = {};
+    F4 direct[kQuarters][3] = {};
     for (size_t li = 0; li < light_count; ++li) {
       const LightLanes& ll = light_lanes_[li];
       if (!ll.lit) continue;
-      for (int h = 0; h < 2; ++h) {
+      for (int h = 0; h < kQuarters; ++h) {
         F4 trans;
         std::memcpy(&trans, &ll.trans[4 * h], sizeof(F4));
         for (int a = 0; a < 3; ++a) direct[h][a] += ll.contrib[h][a] * trans;
@@ -437,7 +439,7 @@ class WaveTracer {
   /// diffuse and highlight it adds there, and their shadow rays.
   void light_lanes(const WaveLanes& w, const PointLight& light, LightLanes& ll) const {
     ll.lit = 0;
-    for (int h = 0; h < 2; ++h) {
+    for (int h = 0; h < kQuarters; ++h) {
       for (int a = 0; a < 3; ++a) ll.contrib[h][a] = F4{};
       for (int k = 0; k < 4; ++k) ll.trans[4 * h + k] = 1.0f;  // the shadow rays may lower it
       F4 to[3];
@@ -598,7 +600,7 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
     const uint64_t t0 = ticks();
     Counters& c = counters.local();
     WaveTracer tracer(scene, opt, c, pre, 1.0f / cam.fy);
-    // The whole tile is one generation: its primary rays as 4x2 packets, then the reflection and
+    // The whole tile is one generation: its primary rays as 4 x kPacketRows packets, then the reflection and
     // refraction rays of all its pixels pooled, so that secondary packets (and their shadow
     // packets) fill their lanes.
     static_assert(kTileSize * kTileSize <= 256, "a pixel of the tile is a uint8_t lane");
@@ -607,7 +609,7 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
     next.reserve(2 * kTileSize * kTileSize);
     glm::vec3 color[kTileSize * kTileSize] = {};
     RayPacket rays;
-    for (int y = t.y0; y < t.y1; y += 2) {
+    for (int y = t.y0; y < t.y1; y += kPacketRows) {
       for (int x = t.x0; x < t.x1; x += 4) {
         const LaneMask mask = primary_packet(cam, x, y, rays);
         for (int i = 0; i < kPacketSize; ++i) {

@@ -60,7 +60,7 @@ ar::SensorFrame Synthesizer::render(int k) {
   core::for_each_tile(o.width, o.height, o.threads, [&](const core::Tile& t) {
     core::RayPacket rays;
     core::HitPacket hits;
-    for (int y = t.y0; y < t.y1; y += 2) {
+    for (int y = t.y0; y < t.y1; y += core::kPacketRows) {
       for (int x = t.x0; x < t.x1; x += 4) {
         const core::LaneMask mask = core::primary_packet(cam, x, y, rays);
         tl.intersect(rays, mask, hits);

@@ -113,7 +113,7 @@ TEST(Bvh, PacketsEqualSingleRaysOnEveryKernel) {
   const auto tris = random_soup(rng, 3000, 0.5f);
   const Bvh bvh(tris);
   const SimdLevel saved = simd_level();
-  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
     if (!simd_level_supported(level)) continue;
     set_simd_level(level);
     for (int p = 0; p < 1000; ++p) {
@@ -124,7 +124,7 @@ TEST(Bvh, PacketsEqualSingleRaysOnEveryKernel) {
         const glm::vec3 d = p % 2 ? test::random_direction(rng) : glm::normalize(base + 0.05f * test::random_direction(rng));
         packet.set(i, Ray{o, d});
       }
-      const LaneMask mask = p % 3 == 0 ? 0x6du : kAllLanes;
+      const LaneMask mask = p % 3 == 0 ? 0x6du : p % 3 == 1 ? 0x9b00u : kAllLanes;
       HitPacket hits;
       bvh.intersect(packet, mask, hits);
       const LaneMask blocked = bvh.occluded(packet, mask);

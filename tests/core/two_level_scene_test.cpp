@@ -133,7 +133,7 @@ TEST(TwoLevelScene, PacketsEqualSingleRays) {
   }
   scene.commit();
   const SimdLevel saved = simd_level();
-  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
     if (!simd_level_supported(level)) continue;
     set_simd_level(level);
     for (int p = 0; p < 600; ++p) {
@@ -208,7 +208,7 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
     scene.add_instance(mesh, glm::mat4(1.0f));
     scene.commit();
     ASSERT_TRUE(scene.has_transmittance());
-    for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2}) {
+    for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
       if (!simd_level_supported(level)) continue;
       set_simd_level(level);
       std::mt19937 r2(5);

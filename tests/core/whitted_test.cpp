@@ -2,12 +2,14 @@
 // point, a mirror, Snell's law through a glass slab, total internal reflection, what each of the
 // four modes adds, and secondary-ray offsets that hold from 1e-3 to 1e4.
 #include "artrace/core/whitted.h"
+#include "artrace/core/simd_level.h"
 
 #include "../test_util.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <iostream>
 #include <random>
 
 namespace artrace::core {
@@ -402,6 +404,27 @@ TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
 /// Floor z = 0 split by a wall x = 0 (both at scale s, moved by `shift`), a light on the +x side
 /// and a grazing one: floor points on the far side are in shadow up to the wall's foot (no light
 /// leaks under it), points on the near side get Lambert's value from each light (no acne).
+TEST(Whitted, SameImageWithEveryPacketKernel) {
+  // the kernels trace a packet 16, 8 or 4 lanes at a time, or lane by lane, with the same float
+  // operations: the frame (glass shadows and secondary rays included) must not change
+  const TestScene s = room();
+  const Camera cam = room_camera(80, 56);
+  WhittedOptions o;
+  o.mode = ShadingMode::kAll;
+  const SimdLevel saved = simd_level();
+  set_simd_level(SimdLevel::kScalar);
+  const Image want = render_whitted(s.shading, cam, o);
+  for (const SimdLevel level : {SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
+    if (!simd_level_supported(level)) {
+      std::cout << "[ note ] " << to_string(level) << " not supported by this CPU, not tested\n";
+      continue;
+    }
+    set_simd_level(level);
+    EXPECT_EQ(render_whitted(s.shading, cam, o).pixels, want.pixels) << to_string(level);
+  }
+  set_simd_level(saved);
+}
+
 void check_offsets(float scale, glm::vec3 shift) {
   TestScene s;
   const uint32_t floor = s.add_material(diffuse({0.5f, 0.5f, 0.5f}));

@@ -1,5 +1,7 @@
-// Packets of 8 coherent rays in structure-of-arrays layout. The AVX2 kernel traces them 8 wide, the
-// SSE kernel as two 4-wide halves (lanes 0-3 and 4-7); `simd_level.h` chooses.
+// Packets of 16 coherent rays in structure-of-arrays layout. The AVX-512 kernel traces them 16
+// wide, the AVX2 kernel as two 8-wide halves, the SSE kernel as four 4-wide quarters (lanes 0-3,
+// 4-7, ...); `simd_level.h` chooses. A packet whose lanes 8-15 are all masked out is traced 8 wide
+// everywhere (callers that build 8-ray packets lose nothing).
 #pragma once
 
 #include "artrace/core/geometry.h"
@@ -8,9 +10,11 @@
 
 namespace artrace::core {
 
-inline constexpr int kPacketSize = 8;
+inline constexpr int kPacketSize = 16;
+/// Camera packets cover 4 x kPacketRows pixels (lane i at column i % 4, row i / 4).
+inline constexpr int kPacketRows = kPacketSize / 4;
 
-struct alignas(32) RayPacket {
+struct alignas(64) RayPacket {
   float org[3][kPacketSize];
   float dir[3][kPacketSize];
   float tmin[kPacketSize];
@@ -36,7 +40,7 @@ struct alignas(32) RayPacket {
   }
 };
 
-struct alignas(32) HitPacket {
+struct alignas(64) HitPacket {
   float t[kPacketSize];
   float u[kPacketSize];
   float v[kPacketSize];

@@ -32,13 +32,13 @@ struct Tile {
 /// cores). Tiles are independent, so the result does not depend on the thread count.
 void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn);
 
-/// The 8 rays of the 4x2 pixel block at (x, y) with packet lane i = (x + i % 4, y + i / 4); lanes
-/// outside the image are left out of the returned mask.
-LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays);
+/// The rays of the 4 x `rows` pixel block at (x, y) with packet lane i = (x + i % 4, y + i / 4),
+/// i < 4 rows; lanes outside the image (and past the block) are left out of the returned mask.
+LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays, int rows = kPacketRows);
 
 struct RenderOptions {
   int threads = 0;      ///< 0 = all cores
-  bool packets = true;  ///< trace 4x2 packets (else single rays)
+  bool packets = true;  ///< trace packets of 4 x kPacketRows pixels (else single rays)
 };
 
 /// Colour of an eye-light hit (shared by the packet and single-ray paths).
@@ -56,7 +56,7 @@ Image render_eye_light(const Tracer& tracer, const TriangleOf& triangle_of, cons
     if (opt.packets) {
       RayPacket rays;
       HitPacket hits;
-      for (int y = t.y0; y < t.y1; y += 2) {
+      for (int y = t.y0; y < t.y1; y += kPacketRows) {
         for (int x = t.x0; x < t.x1; x += 4) {
           const LaneMask mask = primary_packet(cam, x, y, rays);
           tracer.intersect(rays, mask, hits);

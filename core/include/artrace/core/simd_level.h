@@ -5,8 +5,9 @@
 
 namespace artrace::core {
 
-/// Which packet kernels run. `kAuto` picks AVX2 (8 wide) when the CPU has it, else SSE (4 wide).
-enum class SimdLevel { kAuto, kScalar, kSse, kAvx2 };
+/// Which packet kernels run. `kAuto` picks AVX-512 (16 wide) when the CPU has it (F, VL, DQ, BW),
+/// else AVX2 (8 wide), else SSE (4 wide).
+enum class SimdLevel { kAuto, kScalar, kSse, kAvx2, kAvx512 };
 
 /// True when this CPU can run `level` (kScalar, kSse and kAuto always can).
 bool simd_level_supported(SimdLevel level);
@@ -16,7 +17,7 @@ void set_simd_level(SimdLevel level);
 /// The level in force (never kAuto: the resolved one).
 SimdLevel simd_level();
 std::string to_string(SimdLevel level);
-/// Parses "auto", "scalar", "sse", "avx2"; throws std::invalid_argument otherwise.
+/// Parses "auto", "scalar", "sse", "avx2", "avx512"; throws std::invalid_argument otherwise.
 SimdLevel parse_simd_level(const std::string& name);
 
 }  // namespace artrace::core

@@ -1,0 +1,68 @@
+// 16-wide kernels. This file alone is compiled for AVX-512 (F, VL, DQ, BW; FMA contraction stays
+// off, so its hits match the other widths bit for bit); it is reached only through
+// simd_dispatch.cpp after the CPU reported those extensions. A packet with lanes in one half only
+// goes to the AVX2 kernel (callers with 8-ray packets would otherwise pay for 16 lanes).
+#include "kernels.h"
+
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <type_traits>
+#include <utility>
+#include <immintrin.h>
+
+namespace artrace::core::avx512 {
+#include "simd.inc"
+#include "traversal.inc"
+
+namespace {
+
+static_assert(kPacketSize == 16, "one 16-wide pass a packet");
+
+/// Whether only one half of the packet takes part: then the AVX2 kernel traces it (8 wide), which
+/// is faster than this file's code at width 8 (compiled for AVX-512 its masks take extra moves).
+inline bool one_half(LaneMask mask) { return (mask >> 8) == 0 || (mask & 0xffu) == 0; }
+
+}  // namespace
+
+void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (one_half(mask)) return avx2::intersect_packet(tree, rays, mask, hits);
+  trace_lanes<16, false>(tree, rays, 0, mask, &hits);
+}
+
+LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
+  if (one_half(mask)) return avx2::occluded_packet(tree, rays, mask);
+  return trace_lanes<16, true>(tree, rays, 0, mask, nullptr);
+}
+
+void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (one_half(mask)) return avx2::bvh_intersect_packet(bvh, rays, mask, hits);
+  trace_bvh_packet<16, false>(bvh, rays, 0, mask, &hits);
+}
+
+LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
+  if (one_half(mask)) return avx2::bvh_occluded_packet(bvh, rays, mask);
+  return trace_bvh_packet<16, true>(bvh, rays, 0, mask, nullptr);
+}
+
+void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  if (one_half(mask)) return avx2::two_level_intersect_packet(scene, rays, mask, hits);
+  trace_two_level_packet<16, false>(scene, rays, 0, mask, &hits);
+}
+
+LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
+  if (one_half(mask)) return avx2::two_level_occluded_packet(scene, rays, mask);
+  return trace_two_level_packet<16, true>(scene, rays, 0, mask, nullptr);
+}
+
+LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
+  if (one_half(mask)) return avx2::transmittance_packet(tree, rays, mask, trans);
+  return trace_lanes<16, true, true>(tree, rays, 0, mask, nullptr, trans);
+}
+
+LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
+  if (one_half(mask)) return avx2::two_level_transmittance_packet(scene, rays, mask, trans);
+  return trace_two_level_packet<16, true, true>(scene, rays, 0, mask, nullptr, trans);
+}
+
+}  // namespace artrace::core::avx512
