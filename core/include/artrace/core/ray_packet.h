@@ -1,6 +1,6 @@
 // Packets of 16 coherent rays in structure-of-arrays layout. The AVX-512 kernel traces them 16
 // wide, the AVX2 kernel as two 8-wide halves, the SSE kernel as four 4-wide quarters (lanes 0-3,
-// 4-7, ...); `simd_level.h` chooses. A packet whose lanes 8-15 are all masked out is traced 8 wide
+// 4-7, ...); `simd_level.h` chooses. A packet with lanes in one half only is traced 8 wide
 // everywhere (callers that build 8-ray packets lose nothing).
 #pragma once
 

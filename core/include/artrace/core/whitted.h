@@ -2,8 +2,8 @@
 // shadows, mirror reflection and refraction with Fresnel weights and total internal reflection, to a
 // maximum recursion depth (2, as in "A Real-Time Ray Tracer").
 //
-// Rays are traced in generations per 8x8 tile: its primary rays as 4x2 pixel packets, then the
-// reflection and refraction rays of all its pixels regrouped into packets of 8 (or, with
+// Rays are traced in generations per 8x8 tile: its primary rays as 4x4 pixel packets, then the
+// reflection and refraction rays of all its pixels regrouped into packets of 16 (or, with
 // `secondary_packets = false`, traced one by one), and so on. Shadow rays from one packet towards
 // one light form a packet and take the any-hit path, the static triangle that blocked the previous
 // such packet tested first (ShadowHint); rays blocked only by transmissive surfaces are then walked surface by surface and
