@@ -264,7 +264,8 @@ void run(const Options& opt) {
     });
   };
   const double single_ms = median_ms(opt.runs, single_rays(primary));
-  const auto packet_pass = pass(primary, per_tile, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
+  const auto packet_pass =
+      pass(primary, per_tile, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
   const double packet_ms = median_ms(opt.runs, packet_pass);
   const size_t per_tile_shadow = per_tile * std::max<size_t>(1, lights.size());
   std::vector<LaneMask> blocked(shadow.packets.size());

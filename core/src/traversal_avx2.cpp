@@ -19,7 +19,9 @@ void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask ma
 }
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
-  return in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_lanes<8, true>(tree, rays, off, bits, nullptr); });
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_lanes<8, true>(tree, rays, off, bits, nullptr);
+  });
 }
 
 
@@ -28,7 +30,9 @@ void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask ma
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  return in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<8, true>(bvh, rays, off, bits, nullptr); });
+  return in_chunks<8>(mask, [&](int off, uint32_t bits) {
+    return trace_bvh_packet<8, true>(bvh, rays, off, bits, nullptr);
+  });
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {

@@ -68,7 +68,9 @@ void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask ma
 }
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
-  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true>(tree, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) {
+    return trace_lanes<4, true>(tree, rays, off, bits, nullptr);
+  });
 }
 
 void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -119,7 +121,9 @@ void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask ma
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, true>(bvh, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) {
+    return trace_bvh_packet<4, true>(bvh, rays, off, bits, nullptr);
+  });
 }
 
 void bvh_intersect_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -139,11 +143,15 @@ bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray) {
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, false>(scene, rays, off, bits, &hits); });
+  in_chunks<4>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<4, false>(scene, rays, off, bits, &hits);
+  });
 }
 
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
-  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_two_level_packet<4, true>(scene, rays, off, bits, nullptr); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<4, true>(scene, rays, off, bits, nullptr);
+  });
 }
 
 void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
@@ -157,7 +165,9 @@ LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPa
 // ---- transmittance
 
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
-  return in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, true, true>(tree, rays, off, bits, nullptr, trans); });
+  return in_chunks<4>(mask, [&](int off, uint32_t bits) {
+    return trace_lanes<4, true, true>(tree, rays, off, bits, nullptr, trans);
+  });
 }
 
 LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {

@@ -192,8 +192,8 @@ inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std:
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
 // The light loop works on four lanes side by side (GCC vector extensions: one SSE register on the
-// x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes with the same operations, in
-// the same order, as scalar code would, so the result does not depend on the grouping.
+// x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes with the same
+// operations, in the same order, as scalar code would, so the result does not depend on the grouping.
 typedef float F4 __attribute__((vector_size(16)));
 typedef int32_t M4 __attribute__((vector_size(16)));
 static_assert(kPacketSize % 4 == 0, "the light loop works on a wave in quarters of 4 lanes");
@@ -368,9 +368,10 @@ class WaveTracer {
       if (glm::dot(q.ns, q.view) <= 0.0f) q.ns = q.ng;  // an interpolated normal facing away
       q.m = &material(h);
       const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
-      const glm::vec3 tex = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size())
-                                ? s_.textures[texture].sample_level(info.uv, mip_level(r, h.t, info, s_.textures[texture]))
-                                : glm::vec3(1.0f);
+      const bool textured = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size());
+      const glm::vec3 tex = textured ? s_.textures[texture].sample_level(
+                                           info.uv, mip_level(r, h.t, info, s_.textures[texture]))
+                                     : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
       ambient[i] = s_.ambient * q.m->ambient * tex;
@@ -405,7 +406,8 @@ class WaveTracer {
     for (int i = 0; i < n; ++i) {
       if (!((hit_mask >> i) & 1u)) continue;
       const int h = i >> 2, k = i & 3;
-      color[rays[i].lane] += rays[i].weight * (ambient[i] + glm::vec3(direct[h][0][k], direct[h][1][k], direct[h][2][k]));
+      const glm::vec3 light(direct[h][0][k], direct[h][1][k], direct[h][2][k]);
+      color[rays[i].lane] += rays[i].weight * (ambient[i] + light);
     }
 
     // reflection and refraction rays for the next wave
@@ -600,9 +602,9 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
     const uint64_t t0 = ticks();
     Counters& c = counters.local();
     WaveTracer tracer(scene, opt, c, pre, 1.0f / cam.fy);
-    // The whole tile is one generation: its primary rays as 4 x kPacketRows packets, then the reflection and
-    // refraction rays of all its pixels pooled, so that secondary packets (and their shadow
-    // packets) fill their lanes.
+    // The whole tile is one generation: its primary rays as 4 x kPacketRows packets, then the
+    // reflection and refraction rays of all its pixels pooled, so that secondary packets (and
+    // their shadow packets) fill their lanes.
     static_assert(kTileSize * kTileSize <= 256, "a pixel of the tile is a uint8_t lane");
     std::vector<Pending> gen, next;
     gen.reserve(kTileSize * kTileSize);
