@@ -401,9 +401,6 @@ TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
   EXPECT_EQ(a.pixels, c.pixels);
 }
 
-/// Floor z = 0 split by a wall x = 0 (both at scale s, moved by `shift`), a light on the +x side
-/// and a grazing one: floor points on the far side are in shadow up to the wall's foot (no light
-/// leaks under it), points on the near side get Lambert's value from each light (no acne).
 TEST(Whitted, SameImageWithEveryPacketKernel) {
   // the kernels trace a packet 16, 8 or 4 lanes at a time, or lane by lane, with the same float
   // operations: the frame (glass shadows and secondary rays included) must not change
@@ -425,6 +422,9 @@ TEST(Whitted, SameImageWithEveryPacketKernel) {
   set_simd_level(saved);
 }
 
+/// Floor z = 0 split by a wall x = 0 (both at scale s, moved by `shift`), a light on the +x side
+/// and a grazing one: floor points on the far side are in shadow up to the wall's foot (no light
+/// leaks under it), points on the near side get Lambert's value from each light (no acne).
 void check_offsets(float scale, glm::vec3 shift) {
   TestScene s;
   const uint32_t floor = s.add_material(diffuse({0.5f, 0.5f, 0.5f}));
