@@ -32,67 +32,8 @@ static inline int direction_key(float dx, float dy, float dz) {
 /// so that rounding in the slab test never loses a ray that grazes the scene's outer faces.
 Aabb padded_root_box(const Aabb& b);
 
-namespace sse {
-/// Single rays (width 1, compiled for the baseline instruction set).
-Hit intersect_single(const KdTreeView& tree, const Ray& ray);
-bool occluded_single(const KdTreeView& tree, const Ray& ray);
-bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t prim, Hit& hit);
-/// Packets as 4-wide quarters.
-void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
-/// The portable fallback: the lanes one after the other with the width-1 kernel.
-void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask occluded_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
-
-Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray);
-bool bvh_occluded_single(const BvhView& bvh, const Ray& ray);
-void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
-void bvh_intersect_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask bvh_occluded_packet_scalar(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
-
-/// Two-level: continues from the closest hits in `hit` / `hits` (the static kd-tree's).
-void two_level_intersect_single(const TwoLevelView& scene, const Ray& ray, Hit& hit);
-bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray);
-void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
-void two_level_intersect_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
-
-/// Transmittance of the lanes (see TwoLevelScene::transmittance); return the unsure lanes.
-LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
-LaneMask transmittance_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
-LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
-LaneMask two_level_transmittance_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask,
-                                               float* trans);
-}  // namespace sse
-
-namespace avx2 {
-/// Packets as two 8-wide halves; call only when the CPU has AVX2.
-void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
-void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
-void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
-LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
-LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
-}  // namespace avx2
-
-namespace avx512 {
-/// Packets of 16 in one 16-wide pass (8 wide when lanes 8-15 are masked out); call only when the
-/// CPU has AVX-512 F, VL, DQ and BW.
-void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask);
-void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask);
-void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits);
-LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask);
-LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans);
-LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans);
-}  // namespace avx512
-
-/// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
+/// A set of packet kernels, one entry point per query. Each instruction set's file gives its set;
+/// set_simd_level (simd_dispatch.cpp) chooses one.
 struct PacketKernels {
   void (*intersect)(const KdTreeView&, const RayPacket&, LaneMask, HitPacket&);
   LaneMask (*occluded)(const KdTreeView&, const RayPacket&, LaneMask);
@@ -103,6 +44,38 @@ struct PacketKernels {
   LaneMask (*transmittance)(const KdTreeView&, const RayPacket&, LaneMask, float*);
   LaneMask (*two_level_transmittance)(const TwoLevelView&, const RayPacket&, LaneMask, float*);
 };
+
+namespace sse {
+/// Single rays (width 1, compiled for the baseline instruction set).
+Hit intersect_single(const KdTreeView& tree, const Ray& ray);
+bool occluded_single(const KdTreeView& tree, const Ray& ray);
+bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t prim, Hit& hit);
+Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray);
+bool bvh_occluded_single(const BvhView& bvh, const Ray& ray);
+/// Two-level: continues from the closest hit in `hit` (the static kd-tree's).
+void two_level_intersect_single(const TwoLevelView& scene, const Ray& ray, Hit& hit);
+bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray);
+
+/// Packets as 4-wide quarters. Two-level queries continue from the closest hits already in `hits`
+/// (the static kd-tree's); transmittance queries return the unsure lanes (see
+/// TwoLevelScene::transmittance).
+const PacketKernels& kernels();
+/// The portable fallback: the lanes one after the other with the width-1 kernel.
+const PacketKernels& scalar_kernels();
+}  // namespace sse
+
+namespace avx2 {
+/// Packets as two 8-wide halves; call only when the CPU has AVX2.
+const PacketKernels& kernels();
+}  // namespace avx2
+
+namespace avx512 {
+/// Packets in one 16-wide pass (one-half packets go to the AVX2 set); call only when the CPU has
+/// AVX-512 F, VL, DQ and BW.
+const PacketKernels& kernels();
+}  // namespace avx512
+
+/// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
 const PacketKernels& packet_kernels();
 
 }  // namespace artrace::core

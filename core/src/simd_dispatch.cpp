@@ -32,25 +32,12 @@ SimdLevel resolve(SimdLevel level) {
   return level;
 }
 
-PacketKernels kernels_for(SimdLevel level) {
+const PacketKernels& kernels_for(SimdLevel level) {
   switch (level) {
-    case SimdLevel::kAvx512:
-      return {&avx512::intersect_packet, &avx512::occluded_packet, &avx512::bvh_intersect_packet,
-              &avx512::bvh_occluded_packet, &avx512::two_level_intersect_packet, &avx512::two_level_occluded_packet,
-              &avx512::transmittance_packet, &avx512::two_level_transmittance_packet};
-    case SimdLevel::kAvx2:
-      return {&avx2::intersect_packet, &avx2::occluded_packet, &avx2::bvh_intersect_packet,
-              &avx2::bvh_occluded_packet, &avx2::two_level_intersect_packet, &avx2::two_level_occluded_packet,
-              &avx2::transmittance_packet, &avx2::two_level_transmittance_packet};
-    case SimdLevel::kSse:
-      return {&sse::intersect_packet, &sse::occluded_packet, &sse::bvh_intersect_packet,
-              &sse::bvh_occluded_packet, &sse::two_level_intersect_packet, &sse::two_level_occluded_packet,
-              &sse::transmittance_packet, &sse::two_level_transmittance_packet};
-    default:
-      return {&sse::intersect_packet_scalar, &sse::occluded_packet_scalar, &sse::bvh_intersect_packet_scalar,
-              &sse::bvh_occluded_packet_scalar, &sse::two_level_intersect_packet_scalar,
-              &sse::two_level_occluded_packet_scalar, &sse::transmittance_packet_scalar,
-              &sse::two_level_transmittance_packet_scalar};
+    case SimdLevel::kAvx512: return avx512::kernels();
+    case SimdLevel::kAvx2: return avx2::kernels();
+    case SimdLevel::kSse: return sse::kernels();
+    default: return sse::scalar_kernels();
   }
 }
 

@@ -14,6 +14,8 @@ namespace artrace::core::avx2 {
 #include "simd.inc"
 #include "traversal.inc"
 
+namespace {
+
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
   in_chunks<8>(mask, [&](int off, uint32_t bits) { return trace_lanes<8, false>(tree, rays, off, bits, &hits); });
 }
@@ -57,6 +59,16 @@ LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPack
   return in_chunks<8>(mask, [&](int off, uint32_t bits) {
     return trace_two_level_packet<8, true, true>(scene, rays, off, bits, nullptr, trans);
   });
+}
+
+}  // namespace
+
+const PacketKernels& kernels() {
+  static constexpr PacketKernels kSet{&intersect_packet,           &occluded_packet,
+                                      &bvh_intersect_packet,       &bvh_occluded_packet,
+                                      &two_level_intersect_packet, &two_level_occluded_packet,
+                                      &transmittance_packet,       &two_level_transmittance_packet};
+  return kSet;
 }
 
 }  // namespace artrace::core::avx2

@@ -23,46 +23,54 @@ static_assert(kPacketSize == 16, "one 16-wide pass a packet");
 /// file's own width-8 code was 7% slower with vector masks, and no faster with mask registers.
 inline bool one_half(LaneMask mask) { return (mask >> 8) == 0 || (mask & 0xffu) == 0; }
 
-}  // namespace
-
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (one_half(mask)) return avx2::intersect_packet(tree, rays, mask, hits);
+  if (one_half(mask)) return avx2::kernels().intersect(tree, rays, mask, hits);
   trace_lanes<16, false>(tree, rays, 0, mask, &hits);
 }
 
 LaneMask occluded_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
-  if (one_half(mask)) return avx2::occluded_packet(tree, rays, mask);
+  if (one_half(mask)) return avx2::kernels().occluded(tree, rays, mask);
   return trace_lanes<16, true>(tree, rays, 0, mask, nullptr);
 }
 
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (one_half(mask)) return avx2::bvh_intersect_packet(bvh, rays, mask, hits);
+  if (one_half(mask)) return avx2::kernels().bvh_intersect(bvh, rays, mask, hits);
   trace_bvh_packet<16, false>(bvh, rays, 0, mask, &hits);
 }
 
 LaneMask bvh_occluded_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask) {
-  if (one_half(mask)) return avx2::bvh_occluded_packet(bvh, rays, mask);
+  if (one_half(mask)) return avx2::kernels().bvh_occluded(bvh, rays, mask);
   return trace_bvh_packet<16, true>(bvh, rays, 0, mask, nullptr);
 }
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
-  if (one_half(mask)) return avx2::two_level_intersect_packet(scene, rays, mask, hits);
+  if (one_half(mask)) return avx2::kernels().two_level_intersect(scene, rays, mask, hits);
   trace_two_level_packet<16, false>(scene, rays, 0, mask, &hits);
 }
 
 LaneMask two_level_occluded_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask) {
-  if (one_half(mask)) return avx2::two_level_occluded_packet(scene, rays, mask);
+  if (one_half(mask)) return avx2::kernels().two_level_occluded(scene, rays, mask);
   return trace_two_level_packet<16, true>(scene, rays, 0, mask, nullptr);
 }
 
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
-  if (one_half(mask)) return avx2::transmittance_packet(tree, rays, mask, trans);
+  if (one_half(mask)) return avx2::kernels().transmittance(tree, rays, mask, trans);
   return trace_lanes<16, true, true>(tree, rays, 0, mask, nullptr, trans);
 }
 
 LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, float* trans) {
-  if (one_half(mask)) return avx2::two_level_transmittance_packet(scene, rays, mask, trans);
+  if (one_half(mask)) return avx2::kernels().two_level_transmittance(scene, rays, mask, trans);
   return trace_two_level_packet<16, true, true>(scene, rays, 0, mask, nullptr, trans);
+}
+
+}  // namespace
+
+const PacketKernels& kernels() {
+  static constexpr PacketKernels kSet{&intersect_packet,           &occluded_packet,
+                                      &bvh_intersect_packet,       &bvh_occluded_packet,
+                                      &two_level_intersect_packet, &two_level_occluded_packet,
+                                      &transmittance_packet,       &two_level_transmittance_packet};
+  return kSet;
 }
 
 }  // namespace artrace::core::avx512

@@ -63,6 +63,8 @@ bool intersect_triangle_single(const Ray& ray, const Triangle& tri, uint32_t pri
   return true;
 }
 
+namespace {
+
 void intersect_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
   in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_lanes<4, false>(tree, rays, off, bits, &hits); });
 }
@@ -80,6 +82,8 @@ void intersect_packet_scalar(const KdTreeView& tree, const RayPacket& rays, Lane
 LaneMask occluded_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask) {
   return lane_by_lane_occluded(rays, mask, [&](const Ray& r) { return occluded_single(tree, r); });
 }
+
+}  // namespace
 
 // ---- BVH and two-level entry points
 
@@ -116,6 +120,8 @@ Hit bvh_intersect_single(const BvhView& bvh, const Ray& ray) { return to_hit(bvh
 
 bool bvh_occluded_single(const BvhView& bvh, const Ray& ray) { return bvh_single<true>(bvh, ray).done != 0; }
 
+namespace {
+
 void bvh_intersect_packet(const BvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
   in_chunks<4>(mask, [&](int off, uint32_t bits) { return trace_bvh_packet<4, false>(bvh, rays, off, bits, &hits); });
 }
@@ -134,6 +140,8 @@ LaneMask bvh_occluded_packet_scalar(const BvhView& bvh, const RayPacket& rays, L
   return lane_by_lane_occluded(rays, mask, [&](const Ray& r) { return bvh_occluded_single(bvh, r); });
 }
 
+}  // namespace
+
 void two_level_intersect_single(const TwoLevelView& scene, const Ray& ray, Hit& hit) {
   hit = to_hit(two_level_single<false>(scene, ray, hit));
 }
@@ -141,6 +149,8 @@ void two_level_intersect_single(const TwoLevelView& scene, const Ray& ray, Hit& 
 bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray) {
   return two_level_single<true>(scene, ray, Hit{}).done != 0;
 }
+
+namespace {
 
 void two_level_intersect_packet(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
   in_chunks<4>(mask, [&](int off, uint32_t bits) {
@@ -162,7 +172,11 @@ LaneMask two_level_occluded_packet_scalar(const TwoLevelView& scene, const RayPa
   return lane_by_lane_occluded(rays, mask, [&](const Ray& r) { return two_level_occluded_single(scene, r); });
 }
 
+}  // namespace
+
 // ---- transmittance
+
+namespace {
 
 LaneMask transmittance_packet(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
   return in_chunks<4>(mask, [&](int off, uint32_t bits) {
@@ -177,20 +191,34 @@ LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPack
 }
 
 LaneMask transmittance_packet_scalar(const KdTreeView& tree, const RayPacket& rays, LaneMask mask, float* trans) {
-  LaneMask unsure = 0;
-  for (int i = 0; i < kPacketSize; ++i) {
-    if ((mask >> i) & 1u) unsure |= trace_lanes<1, true, true>(tree, rays, i, 1u, nullptr, trans) << i;
-  }
-  return unsure;
+  return in_chunks<1>(mask, [&](int off, uint32_t bits) {
+    return trace_lanes<1, true, true>(tree, rays, off, bits, nullptr, trans);
+  });
 }
 
 LaneMask two_level_transmittance_packet_scalar(const TwoLevelView& scene, const RayPacket& rays, LaneMask mask,
                                                float* trans) {
-  LaneMask unsure = 0;
-  for (int i = 0; i < kPacketSize; ++i) {
-    if ((mask >> i) & 1u) unsure |= trace_two_level_packet<1, true, true>(scene, rays, i, 1u, nullptr, trans) << i;
-  }
-  return unsure;
+  return in_chunks<1>(mask, [&](int off, uint32_t bits) {
+    return trace_two_level_packet<1, true, true>(scene, rays, off, bits, nullptr, trans);
+  });
+}
+
+}  // namespace
+
+const PacketKernels& kernels() {
+  static constexpr PacketKernels kSet{&intersect_packet,           &occluded_packet,
+                                      &bvh_intersect_packet,       &bvh_occluded_packet,
+                                      &two_level_intersect_packet, &two_level_occluded_packet,
+                                      &transmittance_packet,       &two_level_transmittance_packet};
+  return kSet;
+}
+
+const PacketKernels& scalar_kernels() {
+  static constexpr PacketKernels kSet{&intersect_packet_scalar,           &occluded_packet_scalar,
+                                      &bvh_intersect_packet_scalar,       &bvh_occluded_packet_scalar,
+                                      &two_level_intersect_packet_scalar, &two_level_occluded_packet_scalar,
+                                      &transmittance_packet_scalar,       &two_level_transmittance_packet_scalar};
+  return kSet;
 }
 
 }  // namespace artrace::core::sse
