@@ -269,7 +269,8 @@ void run(const Options& opt) {
   const double packet_ms = median_ms(opt.runs, packet_pass);
   const size_t per_tile_shadow = per_tile * std::max<size_t>(1, lights.size());
   std::vector<LaneMask> blocked(shadow.packets.size());
-  const auto shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
+  const auto shadow_pass =
+      pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
   const double shadow_ms = median_ms(opt.runs, shadow_pass);
   // the same packets with a last-occluder hint per light and tile, as the renderer traces them
   auto hinted_pass = [&] {
@@ -306,7 +307,8 @@ void run(const Options& opt) {
     e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
     std::vector<uint32_t> sink(primary.packets.size() * kPacketSize);
     auto embree_single = [&](const Workload& w) {
-      return pass(w, per_tile, [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
+      return pass(w, per_tile,
+                  [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
     };
     e["rays"]["primary_single"] = mrays(primary.rays, median_ms(opt.runs, embree_single(primary)));
     const auto embree_packet_pass = pass(primary, per_tile, [&](size_t p) {
@@ -346,7 +348,8 @@ void run(const Options& opt) {
 #endif
   }
 
-  std::printf("bench-core %s t=%g %dx%d, %d threads, %s kernels, packets of %d rays, %zu triangles (median of %d runs)\n",
+  std::printf("bench-core %s t=%g %dx%d, %d threads, %s kernels, packets of %d rays, %zu triangles "
+              "(median of %d runs)\n",
               opt.scene.c_str(), opt.time, opt.width, opt.height, threads, core::to_string(core::simd_level()).c_str(),
               opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
@@ -366,10 +369,11 @@ void run(const Options& opt) {
                 "shadow_hinted %.3f\n",
                 opt.runs, e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
                 e["paired_ratio"]["shadow_hinted"].get<double>());
-    std::printf("  shadow packets answered differently by embree: %zu (the differing lanes, by brute force: %zu of ours "
-                "wrong, %zu of embree's)\n",
-                e["shadow_packets_disagreeing"].get<size_t>(), e["shadow_disagreeing_lanes_wrong"]["artrace"].get<size_t>(),
-                e["shadow_disagreeing_lanes_wrong"]["embree"].get<size_t>());
+    const nlohmann::json& wrong = e["shadow_disagreeing_lanes_wrong"];
+    std::printf("  shadow packets answered differently by embree: %zu (the differing lanes, by brute force: %zu of "
+                "ours wrong, %zu of embree's)\n",
+                e["shadow_packets_disagreeing"].get<size_t>(), wrong["artrace"].get<size_t>(),
+                wrong["embree"].get<size_t>());
   }
   write_json(opt.json, out);
 }
@@ -390,7 +394,8 @@ void add_bench_core_command(CLI::App& app) {
   cmd->add_option("--reference", opt->reference, "also time the same rays with: none, embree")
       ->capture_default_str()->check(CLI::IsMember({"none", "embree"}));
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
-  cmd->add_option("--lanes", opt->lanes, "rays a packet: 8 (4x2 pixels; Embree's 8-wide calls) or 16 (4x4; its 16-wide ones)")
+  cmd->add_option("--lanes", opt->lanes,
+                  "rays a packet: 8 (4x2 pixels; Embree's 8-wide calls) or 16 (4x4; its 16-wide ones)")
       ->capture_default_str()
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--json", opt->json, "write the results as JSON");

@@ -15,14 +15,18 @@ template <>
 struct Width<8> {
   using Ray = RTCRay8;
   using RayHit = RTCRayHit8;
-  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect8(valid, s, c, rh); }
+  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) {
+    rtcIntersect8(valid, s, c, rh);
+  }
   static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded8(valid, s, c, r); }
 };
 template <>
 struct Width<16> {
   using Ray = RTCRay16;
   using RayHit = RTCRayHit16;
-  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect16(valid, s, c, rh); }
+  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) {
+    rtcIntersect16(valid, s, c, rh);
+  }
   static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded16(valid, s, c, r); }
 };
 
