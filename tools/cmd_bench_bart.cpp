@@ -22,7 +22,7 @@ namespace artrace::tools {
 namespace {
 
 struct Options : AnimationOptions {
-  std::string json, mode = "all", frames_dir, secondary = "packets";
+  std::string json, mode = "all", frames_dir, secondary = "packets", simd = "auto";
   int every = 1;
   float min_weight = 0.0f;
   bool quiet = false;
@@ -291,8 +291,10 @@ void add_bench_bart_command(CLI::App& app) {
   cmd->add_option("--write-frames", opt->frames_dir, "folder to write rendered frames to as PNG");
   cmd->add_option("--every", opt->every, "with --write-frames: every n-th frame")->capture_default_str()->check(CLI::Range(1, 100000));
   cmd->add_option("--json", opt->json, "write the results (with per-frame times) as JSON");
+  cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
   cmd->callback([opt] {
+    core::set_simd_level(core::parse_simd_level(opt->simd));
     const io::AffScene aff = io::load_aff(opt->scene);
     const CellResult r = run_cell(*opt, aff);
     print_cell(r);
