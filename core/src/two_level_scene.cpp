@@ -349,17 +349,6 @@ LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, floa
   return unsure;
 }
 
-Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
-  if (hit.inst == kStaticObject) {
-    return config_ == Config::kKdTreeBvh ? kd_.triangles().at(hit.prim) : static_bvh_->triangles().at(hit.prim);
-  }
-  if (hit.inst & 0x80000000u) return deformables_.at(hit.inst & 0x7fffffffu).mesh->bvh().triangles().at(hit.prim);
-  const Instance& inst = instances_.at(hit.inst);
-  const Triangle& t = meshes_[inst.mesh].bvh->triangles().at(hit.prim);
-  const glm::mat4& m = inst.world_from_object;
-  return {glm::vec3(m * glm::vec4(t.v0, 1.0f)), glm::vec3(m * glm::vec4(t.v1, 1.0f)), glm::vec3(m * glm::vec4(t.v2, 1.0f))};
-}
-
 glm::mat4 TwoLevelScene::world_from_object(const Hit& hit) const {
   if (hit.inst == kStaticObject || (hit.inst & 0x80000000u)) return glm::mat4(1.0f);
   return instances_.at(hit.inst).world_from_object;

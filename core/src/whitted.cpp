@@ -111,6 +111,16 @@ const char* to_string(ShadingMode m) {
 
 void SurfaceAttributes::shading(const Hit&, const Triangle&, SurfaceInfo&) const {}
 
+void SurfaceAttributes::shade_packet(const HitPacket& hits, LaneMask mask, const Triangle* world_tris,
+                                     uint32_t* materials, SurfaceInfo* infos) const {
+  for (int i = 0; i < kPacketSize; ++i) {
+    if (!((mask >> i) & 1u)) continue;
+    const Hit h = hits.get(i);
+    materials[i] = material(h);
+    shading(h, world_tris[i], infos[i]);
+  }
+}
+
 glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, float magnitude) {
   // Wächter & Binder 2019 move each coordinate by a fixed number of ulps of itself. The error of
   // a hit point, though, follows the size of the coordinates that went into it (a floor at z = 0
@@ -314,11 +324,11 @@ class WaveTracer {
     gen.swap(scratch);
   }
 
-  const Material& material(const Hit& h) const {
-    const uint32_t id = s_.surfaces->material(h);
+  const Material& material(uint32_t id) const {
     if (id >= s_.materials.size()) throw std::out_of_range("material index out of range");
     return s_.materials[id];
   }
+  const Material& material(const Hit& h) const { return material(s_.surfaces->material(h)); }
 
   void wave(const Pending* rays, int n, glm::vec3* color, std::vector<Pending>& next) {
     RayPacket rp;
@@ -340,43 +350,50 @@ class WaveTracer {
 
     Point pt[kPacketSize];
     glm::vec3 ambient[kPacketSize];  ///< what each hit reflects of the ambient light
+    Triangle tris[kPacketSize];
     LaneMask hit_mask = 0;
     for (int i = 0; i < n; ++i) {
-      const Pending& r = rays[i];
       if (hp.prim[i] == kInvalidId) {
-        color[r.lane] += r.weight * s_.background;
+        color[rays[i].lane] += rays[i].weight * s_.background;
         continue;
       }
       hit_mask |= 1u << i;
-      const Hit h = hp.get(i);
-      const Triangle tri = s_.geometry->world_triangle(h);
+      tris[i] = s_.geometry->world_triangle(hp.get(i));
+    }
+    if (hit_mask == 0) return;
+    uint32_t material_ids[kPacketSize];
+    SurfaceInfo infos[kPacketSize];
+    s_.surfaces->shade_packet(hp, hit_mask, tris, material_ids, infos);
+    for (int i = 0; i < n; ++i) {
+      if (!((hit_mask >> i) & 1u)) continue;
+      const Pending& r = rays[i];
+      const Triangle& tri = tris[i];
+      const float hu = hp.u[i], hv = hp.v[i], ht = hp.t[i];
       Point& q = pt[i];
-      q.p = tri.v0 * (1.0f - h.u - h.v) + tri.v1 * h.u + tri.v2 * h.v;
+      q.p = tri.v0 * (1.0f - hu - hv) + tri.v1 * hu + tri.v2 * hv;
       q.ng = glm::normalize(tri.geometric_normal());
       q.magnitude = std::max({max_abs(tri.v0), max_abs(tri.v1), max_abs(tri.v2)});
-      SurfaceInfo info;
-      s_.surfaces->shading(h, tri, info);
+      const SurfaceInfo& info = infos[i];
       q.ns = glm::dot(info.normal, info.normal) > 0.0f ? glm::normalize(info.normal) : q.ng;
       const float dir_len = glm::length(r.ray.dir);  // camera rays are not unit length
       q.view = -r.ray.dir / dir_len;
-      q.dist = r.dist + h.t * dir_len;
+      q.dist = r.dist + ht * dir_len;
       if (glm::dot(q.ng, q.view) < 0.0f) {  // the back side: the ray leaves a solid
         q.ng = -q.ng;
         q.ns = -q.ns;
         q.inside = true;
       }
       if (glm::dot(q.ns, q.view) <= 0.0f) q.ns = q.ng;  // an interpolated normal facing away
-      q.m = &material(h);
+      q.m = &material(material_ids[i]);
       const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
       const bool textured = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size());
       const glm::vec3 tex = textured ? s_.textures[texture].sample_level(
-                                           info.uv, mip_level(r, h.t, info, s_.textures[texture]))
+                                           info.uv, mip_level(r, ht, info, s_.textures[texture]))
                                      : glm::vec3(1.0f);
       q.diffuse = q.m->diffuse * tex;
       q.specular = q.m->specular;
       ambient[i] = s_.ambient * q.m->ambient * tex;
     }
-    if (hit_mask == 0) return;
 
     // Direct light. First every light's lanes, contributions and shadow rays, the lanes side by
     // side (one origin per hit), then all the shadow packets in one go, then the sums.
@@ -525,7 +542,8 @@ class WaveTracer {
 
   static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
                    const glm::vec3& weight, const Pending& from) {
-    Pending s;
+    // written in place (a copy built on the stack would be read back before its stores retire)
+    Pending& s = next.emplace_back();
     s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
     s.ray.dir = dir;
     s.ray.tmin = 0.0f;
@@ -534,7 +552,6 @@ class WaveTracer {
     s.lane = from.lane;
     s.depth = static_cast<uint8_t>(from.depth + 1);
     s.dist = q.dist;
-    next.push_back(s);
   }
 
   /// Whether a shadow ray's segment meets a box holding transmissive triangles.

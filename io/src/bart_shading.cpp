@@ -132,13 +132,16 @@ bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {
   return true;
 }
 
-void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, core::SurfaceInfo& info) const {
-  const TriangleBatch* b = anim_.batch(hit);
+namespace {
+
+/// Shading normal, texture coordinates and texture of `hit` on its object's batch `b`.
+inline void shade_hit(const BartAnimation& anim, const TriangleBatch* b, const core::Hit& hit,
+                      const core::Triangle& world, core::SurfaceInfo& info) {
   if (!b || hit.prim >= b->size()) return;
   const float w = 1.0f - hit.u - hit.v;
   const auto& n = b->normals[hit.prim];
   const glm::vec3 object_normal = w * n[0] + hit.u * n[1] + hit.v * n[2];
-  info.normal = hit.inst == core::kStaticObject ? object_normal : anim_.scene().normal_to_world(hit) * object_normal;
+  info.normal = hit.inst == core::kStaticObject ? object_normal : anim.scene().normal_to_world(hit) * object_normal;
   const auto& uv = b->uvs[hit.prim];
   info.uv = w * uv[0] + hit.u * uv[1] + hit.v * uv[2];
   info.texture = b->texture[hit.prim];
@@ -147,6 +150,22 @@ void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, co
     const float uv_area = std::fabs(e1.x * e2.y - e1.y * e2.x);
     const float world_area = glm::length(world.geometric_normal());
     info.uv_per_world = world_area > 0.0f ? std::sqrt(uv_area / world_area) : 0.0f;
+  }
+}
+
+}  // namespace
+
+void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, core::SurfaceInfo& info) const {
+  shade_hit(anim_, anim_.batch(hit), hit, world, info);
+}
+
+void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask, const core::Triangle* world_tris,
+                                uint32_t* materials, core::SurfaceInfo* infos) const {
+  for (int i = 0; i < core::kPacketSize; ++i) {
+    if (!((mask >> i) & 1u)) continue;
+    const core::Hit h = hits.get(i);
+    materials[i] = anim_.material(h);
+    shade_hit(anim_, anim_.batch(h), h, world_tris[i], infos[i]);
   }
 }
 

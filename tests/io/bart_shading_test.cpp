@@ -1,6 +1,6 @@
 // BART shading inputs: PPM textures (and the errors for broken ones), the kitchen's materials,
 // lights and textures, and its Whitted render being the same for any thread count and either way
-// of tracing secondary rays.
+// of tracing secondary rays; the packet-wise shading answers equal the hit-by-hit ones.
 #include "artrace/core/srgb.h"
 #include "artrace/io/bart_shading.h"
 #include "artrace/io/parse_error.h"
@@ -83,6 +83,57 @@ TEST(BartShading, KitchenRendersTheSameForAnyThreadCountAndSecondaryRayGrouping)
     lit += p.x + p.y + p.z > 0.05f;
   }
   EXPECT_GT(lit, static_cast<int>(one.pixels.size()) * 9 / 10) << "the kitchen is lit";
+}
+
+TEST(BartShading, PacketShadingEqualsHitByHit) {
+  ARTRACE_REQUIRE_SHARED("bart/robots/aff/Robot.aff");
+  const AffScene aff = load_aff(shared_path);
+  BartAnimation anim(aff, core::TwoLevelScene::Config::kKdTreeBvh);
+  BartSurfaces surfaces(anim);
+  anim.set_time(7.5);  // robots mid-walk: hits on moved instances, textured and not
+  const core::Camera cam = aff.camera_at(7.5, 64, 48);
+  int hits = 0, moved = 0, textured = 0;
+  for (int y = 0; y < 48; ++y) {
+    for (int x0 = 0; x0 < 64; x0 += core::kPacketSize) {
+      core::RayPacket rays;
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        rays.set(i, cam.ray(x0 + i + 0.5f, y + 0.5f));
+      }
+      core::HitPacket hp;
+      anim.scene().intersect(rays, core::kAllLanes, hp);
+      core::LaneMask mask = 0;
+      core::Triangle tris[core::kPacketSize];
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        if (hp.prim[i] == core::kInvalidId) continue;
+        mask |= 1u << i;
+        tris[i] = anim.scene().world_triangle(hp.get(i));
+      }
+      if ((y + x0) % 3 == 0) mask &= ~1u;  // a lane left out keeps what it had
+      uint32_t packet_mat[core::kPacketSize], single_mat[core::kPacketSize];
+      std::fill(std::begin(packet_mat), std::end(packet_mat), 12345u);
+      std::fill(std::begin(single_mat), std::end(single_mat), 12345u);
+      core::SurfaceInfo packet_info[core::kPacketSize], single_info[core::kPacketSize];
+      surfaces.shade_packet(hp, mask, tris, packet_mat, packet_info);
+      surfaces.core::SurfaceAttributes::shade_packet(hp, mask, tris, single_mat, single_info);
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        ASSERT_EQ(packet_mat[i], single_mat[i]) << "lane " << i;
+        EXPECT_EQ(packet_info[i].normal, single_info[i].normal);
+        EXPECT_EQ(packet_info[i].uv, single_info[i].uv);
+        EXPECT_EQ(packet_info[i].texture, single_info[i].texture);
+        EXPECT_EQ(packet_info[i].uv_per_world, single_info[i].uv_per_world);
+        if (!((mask >> i) & 1u)) {
+          EXPECT_EQ(packet_mat[i], 12345u) << "a lane outside the mask was written";
+          continue;
+        }
+        ++hits;
+        moved += hp.inst[i] != core::kStaticObject;
+        textured += packet_info[i].texture >= 0;
+      }
+    }
+  }
+  EXPECT_GT(hits, 64 * 48 / 2);
+  EXPECT_GT(moved, 50) << "some hits on the robots themselves";
+  EXPECT_GT(textured, 50);
 }
 
 }  // namespace

@@ -133,7 +133,8 @@ class TwoLevelScene {
   /// more than 16 distinct transmissive triangles of the static kd-tree; walk those instead).
   LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint = nullptr) const;
 
-  /// The triangle a hit names, in world space.
+  /// The triangle a hit names, in world space. Inline: the shader calls it for every hit, and a
+  /// triangle returned through memory costs a store-forwarding stall when read back.
   Triangle world_triangle(const Hit& hit) const;
   /// The transform of the object a hit names (identity for static and deformable geometry).
   glm::mat4 world_from_object(const Hit& hit) const;
@@ -189,5 +190,16 @@ class TwoLevelScene {
   std::vector<TopNode> top_;
   bool dirty_ = true;
 };
+
+inline Triangle TwoLevelScene::world_triangle(const Hit& hit) const {
+  if (hit.inst == kStaticObject) {
+    return config_ == Config::kKdTreeBvh ? kd_.triangles().at(hit.prim) : static_bvh_->triangles().at(hit.prim);
+  }
+  if (hit.inst & 0x80000000u) return deformables_.at(hit.inst & 0x7fffffffu).mesh->bvh().triangles().at(hit.prim);
+  const Instance& inst = instances_.at(hit.inst);
+  const Triangle& t = meshes_[inst.mesh].bvh->triangles().at(hit.prim);
+  const glm::mat4& m = inst.world_from_object;
+  return {glm::vec3(m * glm::vec4(t.v0, 1.0f)), glm::vec3(m * glm::vec4(t.v1, 1.0f)), glm::vec3(m * glm::vec4(t.v2, 1.0f))};
+}
 
 }  // namespace artrace::core

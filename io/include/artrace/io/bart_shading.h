@@ -19,6 +19,8 @@ class BartSurfaces : public core::SurfaceAttributes {
   explicit BartSurfaces(const BartAnimation& animation);
   uint32_t material(const core::Hit& hit) const override { return anim_.material(hit); }
   void shading(const core::Hit& hit, const core::Triangle& world_tri, core::SurfaceInfo& info) const override;
+  void shade_packet(const core::HitPacket& hits, core::LaneMask mask, const core::Triangle* world_tris,
+                    uint32_t* materials, core::SurfaceInfo* infos) const override;
   /// Boxes around runs of transmissive triangles of the static geometry, and the moved box of
   /// every animated object that has some.
   bool transmissive_bounds(std::vector<core::Aabb>& boxes) const override;
