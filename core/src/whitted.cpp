@@ -542,7 +542,6 @@ class WaveTracer {
 
   static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
                    const glm::vec3& weight, const Pending& from) {
-    // written in place (a copy built on the stack would be read back before its stores retire)
     Pending& s = next.emplace_back();
     s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
     s.ray.dir = dir;

@@ -161,6 +161,8 @@ void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, co
 
 void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask, const core::Triangle* world_tris,
                                 uint32_t* materials, core::SurfaceInfo* infos) const {
+  // the default's loop, with direct calls: shade_hit inline (one shared loop calling shading() by
+  // name was measured at 0.6% more instructions a robots frame: GCC kept shading() out of line)
   for (int i = 0; i < core::kPacketSize; ++i) {
     if (!((mask >> i) & 1u)) continue;
     const core::Hit h = hits.get(i);

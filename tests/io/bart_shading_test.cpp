@@ -109,25 +109,28 @@ TEST(BartShading, PacketShadingEqualsHitByHit) {
         tris[i] = anim.scene().world_triangle(hp.get(i));
       }
       if ((y + x0) % 3 == 0) mask &= ~1u;  // a lane left out keeps what it had
-      uint32_t packet_mat[core::kPacketSize], single_mat[core::kPacketSize];
-      std::fill(std::begin(packet_mat), std::end(packet_mat), 12345u);
-      std::fill(std::begin(single_mat), std::end(single_mat), 12345u);
-      core::SurfaceInfo packet_info[core::kPacketSize], single_info[core::kPacketSize];
-      surfaces.shade_packet(hp, mask, tris, packet_mat, packet_info);
-      surfaces.core::SurfaceAttributes::shade_packet(hp, mask, tris, single_mat, single_info);
+      uint32_t materials[core::kPacketSize];
+      std::fill(std::begin(materials), std::end(materials), 12345u);
+      core::SurfaceInfo infos[core::kPacketSize];
+      surfaces.shade_packet(hp, mask, tris, materials, infos);
       for (int i = 0; i < core::kPacketSize; ++i) {
-        ASSERT_EQ(packet_mat[i], single_mat[i]) << "lane " << i;
-        EXPECT_EQ(packet_info[i].normal, single_info[i].normal);
-        EXPECT_EQ(packet_info[i].uv, single_info[i].uv);
-        EXPECT_EQ(packet_info[i].texture, single_info[i].texture);
-        EXPECT_EQ(packet_info[i].uv_per_world, single_info[i].uv_per_world);
         if (!((mask >> i) & 1u)) {
-          EXPECT_EQ(packet_mat[i], 12345u) << "a lane outside the mask was written";
+          EXPECT_EQ(materials[i], 12345u) << "a lane outside the mask was written";
+          EXPECT_EQ(infos[i].texture, -1);
+          EXPECT_EQ(infos[i].normal, glm::vec3(0.0f));
           continue;
         }
+        const core::Hit h = hp.get(i);
+        core::SurfaceInfo one;
+        surfaces.shading(h, tris[i], one);
+        ASSERT_EQ(materials[i], surfaces.material(h)) << "lane " << i;
+        EXPECT_EQ(infos[i].normal, one.normal);
+        EXPECT_EQ(infos[i].uv, one.uv);
+        EXPECT_EQ(infos[i].texture, one.texture);
+        EXPECT_EQ(infos[i].uv_per_world, one.uv_per_world);
         ++hits;
-        moved += hp.inst[i] != core::kStaticObject;
-        textured += packet_info[i].texture >= 0;
+        moved += h.inst != core::kStaticObject;
+        textured += one.texture >= 0;
       }
     }
   }

@@ -133,8 +133,7 @@ class TwoLevelScene {
   /// more than 16 distinct transmissive triangles of the static kd-tree; walk those instead).
   LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint = nullptr) const;
 
-  /// The triangle a hit names, in world space. Inline: the shader calls it for every hit, and a
-  /// triangle returned through memory costs a store-forwarding stall when read back.
+  /// The triangle a hit names, in world space (inline: the shader asks for every hit's).
   Triangle world_triangle(const Hit& hit) const;
   /// The transform of the object a hit names (identity for static and deformable geometry).
   glm::mat4 world_from_object(const Hit& hit) const;

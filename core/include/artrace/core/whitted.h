@@ -88,8 +88,8 @@ class SurfaceAttributes {
   virtual void shading(const Hit& hit, const Triangle& world_tri, SurfaceInfo& info) const;
   /// Both for the hits of a packet, lanes of `mask`: materials[i] = material(hit i), and infos[i]
   /// as shading() fills it (world_tris[i]: the hit's triangle in world space). The renderer asks
-  /// once per packet (a hit's answers are read well after they were written, and one virtual call
-  /// serves 16 hits); the default asks hit by hit.
+  /// once per packet; the default asks hit by hit, two virtual calls a hit, which an override can
+  /// make direct (and inline).
   virtual void shade_packet(const HitPacket& hits, LaneMask mask, const Triangle* world_tris, uint32_t* materials,
                             SurfaceInfo* infos) const;
   /// World boxes holding every transmissive triangle (for the current frame). A shadow ray found
