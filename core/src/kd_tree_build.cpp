@@ -203,35 +203,56 @@ Aabb intersect_boxes(const Aabb& a, const Aabb& b) {
   return r;
 }
 
-/// Bounds of the part of `tri` inside `voxel` ("perfect split" clipping). Falls back to the
-/// conservative box intersection when rounding clips everything away.
-Aabb clipped_bounds(const Triangle& tri, const Aabb& voxel) {
+/// Bounds of the parts of `tri` inside the two children of a split at `pos` on `axis` (their
+/// voxels `voxel_left`, `voxel_right`): "perfect split" clipping. The triangle is clipped to the
+/// parent voxel (only the planes it crosses), then the polygon is cut by the split plane in one
+/// pass (a vertex in the plane goes to both sides): one clip of the triangle for both children
+/// instead of one each. A side where rounding clips everything away gets the conservative box
+/// intersection.
+void clipped_bounds_split(const Triangle& tri, const Aabb& voxel_left, const Aabb& voxel_right, int axis, float pos,
+                          Aabb& left, Aabb& right) {
+  Aabb voxel = voxel_left;
+  voxel.hi = voxel_right.hi;
   const Aabb tri_box = Aabb::of(tri);
   glm::vec3 buf_a[16] = {tri.v0, tri.v1, tri.v2};
   glm::vec3 buf_b[16];
   glm::vec3* in = buf_a;
   glm::vec3* out = buf_b;
   int n = 3;
-  bool clipped = false;
-  // Only the planes the triangle crosses can change its bounds.
   for (int a = 0; a < 3 && n > 0; ++a) {
     if (coord(tri_box.lo, a) < coord(voxel.lo, a)) {
       n = clip_polygon(in, n, out, a, coord(voxel.lo, a), false);
       std::swap(in, out);
-      clipped = true;
     }
     if (n > 0 && coord(tri_box.hi, a) > coord(voxel.hi, a)) {
       n = clip_polygon(in, n, out, a, coord(voxel.hi, a), true);
       std::swap(in, out);
-      clipped = true;
     }
   }
-  if (!clipped) return tri_box;
-  Aabb box;
-  for (int i = 0; i < n; ++i) box.extend(in[i]);
-  box = intersect_boxes(box, voxel);
-  if (box.empty()) box = intersect_boxes(tri_box, voxel);
-  return box;
+  Aabb bl, br;
+  if (n > 0) {
+    const glm::vec3* cur = &in[n - 1];
+    float cur_x = coord(*cur, axis);
+    for (int i = 0; i < n; ++i) {
+      const glm::vec3* nxt = &in[i];
+      const float nxt_x = coord(*nxt, axis);
+      if ((cur_x < pos && nxt_x > pos) || (cur_x > pos && nxt_x < pos)) {
+        const float t = (pos - cur_x) / (nxt_x - cur_x);
+        glm::vec3 p = *cur + t * (*nxt - *cur);
+        set_coord(p, axis, pos);
+        bl.extend(p);
+        br.extend(p);
+      }
+      if (nxt_x <= pos) bl.extend(*nxt);
+      if (nxt_x >= pos) br.extend(*nxt);
+      cur = nxt;
+      cur_x = nxt_x;
+    }
+  }
+  left = intersect_boxes(bl, voxel_left);
+  if (left.empty()) left = intersect_boxes(tri_box, voxel_left);
+  right = intersect_boxes(br, voxel_right);
+  if (right.empty()) right = intersect_boxes(tri_box, voxel_right);
 }
 
 class Builder {
@@ -338,8 +359,8 @@ class Builder {
       bool go_left, go_right;
       classify(coord(r->box.lo, a), coord(r->box.hi, a), split, go_left, go_right);
       if (go_left && go_right) {
-        const Aabb bl = clipped_bounds(tris_[r->tri], voxel_left);
-        const Aabb br = clipped_bounds(tris_[r->tri], voxel_right);
+        Aabb bl, br;
+        clipped_bounds_split(tris_[r->tri], voxel_left, voxel_right, a, split.pos, bl, br);
         if (!bl.empty()) left.push_back(Ref{r->tri, bl});
         if (!br.empty()) right.push_back(Ref{r->tri, br});
       } else if (go_left) {
@@ -675,8 +696,8 @@ class Builder {
       bool go_left, go_right;
       classify(coord(it.lo, a), coord(it.hi, a), split, go_left, go_right);
       if (go_left && go_right) {
-        const Aabb bl = clipped_bounds(tris_[it.tri], voxel_left);
-        const Aabb br = clipped_bounds(tris_[it.tri], voxel_right);
+        Aabb bl, br;
+        clipped_bounds_split(tris_[it.tri], voxel_left, voxel_right, a, split.pos, bl, br);
         if (!bl.empty()) {
           c.clipped_left.set(c.n_left);
           c.left[c.n_left++] = Item{it.tri, bl.lo, bl.hi};
@@ -826,8 +847,8 @@ class Builder {
     }
     EventList new_left[3], new_right[3];
     for (const uint32_t t : straddling) {
-      const Aabb bl = clipped_bounds(tris_[t], voxel_left);
-      const Aabb br = clipped_bounds(tris_[t], voxel_right);
+      Aabb bl, br;
+      clipped_bounds_split(tris_[t], voxel_left, voxel_right, split.axis, split.pos, bl, br);
       if (!bl.empty()) {
         add_events(new_left, bl, t);
         ++n_left;
