@@ -445,17 +445,23 @@ class Builder {
     struct Counts {
       uint32_t lower[3][kMaxBins], upper[3][kMaxBins];
     };
+    // One pass over the references for the three axes. A bin is the position's offset times
+    // bins / extent, clamped to [0, bins - 1] before it is truncated (an unusable axis has scale
+    // 0: everything in bin 0, counts never read).
     auto count = [&](const Ref* begin, const Ref* end, Counts& c) {
+      float lo[3], scale[3];
       for (int k = 0; k < 3; ++k) {
         std::fill(c.lower[k], c.lower[k] + bins, 0u);
         std::fill(c.upper[k], c.upper[k] + bins, 0u);
-        if (!pl.usable(k)) continue;
-        const float lo = pl.lo(k);
-        const float scale = static_cast<float>(bins) / (pl.hi(k) - lo);
-        auto bin = [&](float x) { return std::clamp(static_cast<int>((x - lo) * scale), 0, bins - 1); };
-        for (const Ref* r = begin; r != end; ++r) {
-          ++c.lower[k][bin(coord(r->box.lo, k))];
-          ++c.upper[k][bin(coord(r->box.hi, k))];
+        lo[k] = pl.lo(k);
+        scale[k] = pl.usable(k) ? static_cast<float>(bins) / (pl.hi(k) - lo[k]) : 0.0f;
+      }
+      const float top = static_cast<float>(bins - 1);
+      auto bin = [&](float x, int k) { return static_cast<int>(std::min(std::max((x - lo[k]) * scale[k], 0.0f), top)); };
+      for (const Ref* r = begin; r != end; ++r) {
+        for (int k = 0; k < 3; ++k) {
+          ++c.lower[k][bin(coord(r->box.lo, k), k)];
+          ++c.upper[k][bin(coord(r->box.hi, k), k)];
         }
       }
     };
