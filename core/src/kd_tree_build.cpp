@@ -446,8 +446,9 @@ class Builder {
       uint32_t lower[3][kMaxBins], upper[3][kMaxBins];
     };
     // One pass over the references for the three axes. A bin is the position's offset times
-    // bins / extent, clamped to [0, bins - 1] before it is truncated (an unusable axis has scale
-    // 0: everything in bin 0, counts never read).
+    // bins / extent, clamped to [0, bins - 1] before it is truncated: an infinite product (a
+    // denormal extent) goes to the last bin, a NaN one (0 times that infinite scale) to bin 0.
+    // An unusable axis has scale 0: everything in bin 0, counts never read.
     auto count = [&](const Ref* begin, const Ref* end, Counts& c) {
       float lo[3], scale[3];
       for (int k = 0; k < 3; ++k) {
@@ -457,7 +458,10 @@ class Builder {
         scale[k] = pl.usable(k) ? static_cast<float>(bins) / (pl.hi(k) - lo[k]) : 0.0f;
       }
       const float top = static_cast<float>(bins - 1);
-      auto bin = [&](float x, int k) { return static_cast<int>(std::min(std::max((x - lo[k]) * scale[k], 0.0f), top)); };
+      auto bin = [&](float x, int k) {
+        const float f = (x - lo[k]) * scale[k];
+        return f > 0.0f ? static_cast<int>(std::min(f, top)) : 0;
+      };
       for (const Ref* r = begin; r != end; ++r) {
         for (int k = 0; k < 3; ++k) {
           ++c.lower[k][bin(coord(r->box.lo, k), k)];

@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 
 #include <cstring>
+#include <limits>
 
 namespace artrace::core {
 namespace {
@@ -136,6 +137,26 @@ TEST(KdTree, AdversarialCasesMatchBruteForce) {
   rays.push_back(Ray{{-2, 0, 0.5f}, {1, 0, 0}});
   rays.push_back(Ray{{1, 0.5f, -3}, {0, 0, 1}});
   expect_matches_brute_force(tris, rays, "adversarial");
+}
+
+/// A slab far thinner than a float's normal range: bins / extent overflows to infinity in the
+/// binned splits, and 0 times it is NaN; every bin must still land inside the counts.
+TEST(KdTree, DenormalThinSlabMatchesBruteForce) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> xz(0.0f, 10.0f), y(0.0f, 1e-39f);
+  std::vector<Triangle> tris;
+  for (int i = 0; i < 3000; ++i) {
+    const glm::vec3 c(xz(rng), 0.0f, xz(rng));
+    auto vertex = [&] { return c + glm::vec3(xz(rng) * 0.05f, y(rng), xz(rng) * 0.05f); };
+    tris.push_back({vertex(), vertex(), vertex()});
+  }
+  ASSERT_LT(Aabb::of(tris[0]).hi.y, std::numeric_limits<float>::min()) << "the slab should be denormal";
+  std::vector<Ray> rays;
+  for (int i = 0; i < 3000; ++i) {
+    const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+    rays.push_back(Ray{o, glm::vec3(xz(rng), 0.0f, xz(rng)) - o});
+  }
+  expect_matches_brute_force(tris, rays, "denormal slab");
 }
 
 TEST(KdTree, ClosedMeshHasNoLeaks) {
