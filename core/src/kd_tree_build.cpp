@@ -229,6 +229,8 @@ void clipped_bounds_split(const Triangle& tri, const Aabb& voxel_left, const Aab
       std::swap(in, out);
     }
   }
+  // clip_polygon()'s rule for both sides of the split plane at once, into bounds instead of
+  // polygons (two clip_polygon() calls instead: 3.3% more build instructions on the kitchen)
   Aabb bl, br;
   if (n > 0) {
     const glm::vec3* cur = &in[n - 1];

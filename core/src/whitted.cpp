@@ -121,26 +121,6 @@ void SurfaceAttributes::shade_packet(const HitPacket& hits, LaneMask mask, const
   }
 }
 
-namespace {
-
-/// offset_ray_origin(), inlined into the shading loops (a call per shadow origin and secondary ray
-/// otherwise).
-__attribute__((always_inline)) inline glm::vec3 offset_origin(const glm::vec3& p, const glm::vec3& n, float magnitude) {
-  // Wächter & Binder 2019 move each coordinate by a fixed number of ulps of itself. The error of
-  // a hit point, though, follows the size of the coordinates that went into it (a floor at z = 0
-  // far from the origin has error in z of the order of ulp(x)), so the step is taken relative to
-  // the largest coordinate of the point and of its triangle: 2^-18 of it, about 64 ulps.
-  const float m = std::max(std::max(std::fabs(p.x), std::fabs(p.y)), std::max(std::fabs(p.z), magnitude));
-  const float d = std::max(m * 0x1p-18f, 0x1p-100f);
-  return p + d * n;
-}
-
-}  // namespace
-
-glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, float magnitude) {
-  return offset_origin(p, n, magnitude);
-}
-
 float fresnel_dielectric(float cos_i, float eta) {
   cos_i = std::clamp(cos_i, 0.0f, 1.0f);
   const float sin2_t = eta * eta * (1.0f - cos_i * cos_i);
@@ -253,7 +233,7 @@ struct WaveLanes {
     for (int i = 0; i < kPacketSize; ++i) {
       const int h = i >> 2, k = i & 3;
       const Point* q = ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
-      const glm::vec3 o = q && origins ? offset_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
+      const glm::vec3 o = q && origins ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
       for (int a = 0; a < 3; ++a) {
         p[h][a][k] = q ? q->p[a] : 0.0f;
         ng[h][a][k] = q ? q->ng[a] : 0.0f;
@@ -553,7 +533,7 @@ class WaveTracer {
   static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
                    const glm::vec3& weight, const Pending& from) {
     Pending& s = next.emplace_back();
-    s.ray.org = offset_origin(q.p, side, q.magnitude);
+    s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
     s.ray.dir = dir;
     s.ray.tmin = 0.0f;
     s.ray.tmax = kInfinity;
