@@ -177,18 +177,6 @@ struct Pending {
   float dist = 0.0f;  ///< path length from the eye to the ray's origin (for texture footprints)
 };
 
-/// A shaded hit of the current wave.
-struct Point {
-  glm::vec3 p, ng, ns, view;
-  glm::vec3 diffuse, specular;
-  float magnitude = 0.0f;  ///< largest coordinate of the hit triangle
-  float dist = 0.0f;       ///< path length from the eye
-  const Material* m = nullptr;
-  bool inside = false;
-};
-
-inline float max_abs(const glm::vec3& v) { return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}); }
-
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
 // The light loop works on four lanes side by side (GCC vector extensions: one SSE register on the
@@ -219,35 +207,125 @@ inline uint32_t bits4(M4 m) {
 #endif
 }
 
-/// The shaded hits of a wave as structure of arrays (quarters of 4 lanes), for the light loop.
+/// Lane i of a quarter-grouped vector.
+inline glm::vec3 lane3(const F4 (&v)[kQuarters][3], int i) {
+  const int h = i >> 2, k = i & 3;
+  return glm::vec3(v[h][0][k], v[h][1][k], v[h][2][k]);
+}
+
+inline void set_lane3(F4 (&v)[kQuarters][3], int i, const glm::vec3& x) {
+  const int h = i >> 2, k = i & 3;
+  for (int a = 0; a < 3; ++a) v[h][a][k] = x[a];
+}
+
+/// a < b ? b : a, lane by lane (std::max's rule).
+inline F4 max4(F4 a, F4 b) { return (F4)(((M4)b & (a < b)) | ((M4)a & ~(a < b))); }
+
+/// mask ? a : b, lane by lane.
+inline F4 select4(M4 mask, F4 a, F4 b) { return (F4)(((M4)a & mask) | ((M4)b & ~mask)); }
+
+/// glm's dot of three-vectors: (x x' + y y') + z z'.
+inline F4 dot4(const F4* a, const F4* b) { return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]; }
+
+/// The shaded hits of a wave as structure of arrays (quarters of 4 lanes, one SSE register each).
+/// The geometry is worked out side by side with the operations, in the order, of the scalar glm
+/// code it replaced (no FMA contraction in this project), so every lane gets the same bits.
 struct WaveLanes {
   F4 p[kQuarters][3], ng[kQuarters][3], ns[kQuarters][3], view[kQuarters][3], diffuse[kQuarters][3],
       specular[kQuarters][3], org[kQuarters][3];
+  F4 magnitude[kQuarters];                  ///< largest coordinate of the hit triangle
+  F4 dist[kQuarters];                       ///< path length from the eye
   F4 min_cos[kQuarters];                    ///< highlight cut-off cosine (2: none)
   M4 hit[kQuarters], highlight[kQuarters];  ///< lanes with a hit; lanes whose material has a highlight
+  M4 inside[kQuarters];                     ///< the ray met the back side (it leaves a solid)
   float shine[kPacketSize];
+  const Material* m[kPacketSize];
 
-  /// `origins`: also the shadow rays' origins (only when shadows are traced).
-  void gather(const Point* pt, LaneMask hit_mask, const std::vector<float>& highlight_cos, const Material* materials,
-              bool origins) {
-    for (int i = 0; i < kPacketSize; ++i) {
-      const int h = i >> 2, k = i & 3;
-      const Point* q = ((hit_mask >> i) & 1u) ? &pt[i] : nullptr;
-      const glm::vec3 o = q && origins ? offset_ray_origin(q->p, q->ng, q->magnitude) : glm::vec3(0.0f);
-      for (int a = 0; a < 3; ++a) {
-        p[h][a][k] = q ? q->p[a] : 0.0f;
-        ng[h][a][k] = q ? q->ng[a] : 0.0f;
-        ns[h][a][k] = q ? q->ns[a] : 0.0f;
-        view[h][a][k] = q ? q->view[a] : 0.0f;
-        diffuse[h][a][k] = q ? q->diffuse[a] : 0.0f;
-        specular[h][a][k] = q ? q->specular[a] : 0.0f;
-        org[h][a][k] = o[a];
+  /// Hit point, normals (geometric and shading, both facing the viewer), view direction and path
+  /// length of the lanes of `hit_mask`; zero in the others.
+  void geometry(const Triangle* tris, const HitPacket& hp, const Pending* rays, const SurfaceInfo* infos,
+                LaneMask hit_mask) {
+    for (int h = 0; h < kQuarters; ++h) {
+      F4 v0[3] = {}, v1[3] = {}, v2[3] = {}, n[3] = {}, d[3] = {};
+      F4 u = {}, v = {}, t = {}, from = {};
+      M4 lanes = {};
+      for (int k = 0; k < 4; ++k) {
+        const int i = 4 * h + k;
+        if (!((hit_mask >> i) & 1u)) continue;
+        lanes[k] = -1;
+        const Triangle& tri = tris[i];
+        for (int a = 0; a < 3; ++a) {
+          v0[a][k] = tri.v0[a];
+          v1[a][k] = tri.v1[a];
+          v2[a][k] = tri.v2[a];
+          n[a][k] = infos[i].normal[a];
+          d[a][k] = rays[i].ray.dir[a];
+        }
+        u[k] = hp.u[i];
+        v[k] = hp.v[i];
+        t[k] = hp.t[i];
+        from[k] = rays[i].dist;
       }
-      const float mc = q ? highlight_cos[static_cast<size_t>(q->m - materials)] : 2.0f;
-      min_cos[h][k] = mc;
-      shine[i] = q ? q->m->shine : 0.0f;
-      hit[h][k] = q ? -1 : 0;
-      highlight[h][k] = (q && mc < 1.0f && max3(q->specular) > 0.0f) ? -1 : 0;
+      hit[h] = lanes;
+      const F4 w = (1.0f - u) - v;
+      F4 e1[3], e2[3];
+      for (int a = 0; a < 3; ++a) {
+        p[h][a] = (F4)((M4)((v0[a] * w + v1[a] * u) + v2[a] * v) & lanes);
+        e1[a] = v1[a] - v0[a];
+        e2[a] = v2[a] - v0[a];
+      }
+      // glm::normalize(glm::cross(e1, e2)): v * (1 / sqrt(dot(v, v)))
+      F4 g[3] = {e1[1] * e2[2] - e2[1] * e1[2], e1[2] * e2[0] - e2[2] * e1[0], e1[0] * e2[1] - e2[0] * e1[1]};
+      F4 len = dot4(g, g);
+      sqrt4(len);
+      F4 inv = 1.0f / len;
+      for (int a = 0; a < 3; ++a) g[a] = g[a] * inv;
+      // std::max({|x|, |y|, |z|}) of each vertex, then of the three
+      auto max_abs = [](const F4* c) {
+        F4 m = (F4)((M4)c[0] & 0x7fffffff);
+        m = max4(m, (F4)((M4)c[1] & 0x7fffffff));
+        return max4(m, (F4)((M4)c[2] & 0x7fffffff));
+      };
+      magnitude[h] = max4(max4(max_abs(v0), max_abs(v1)), max_abs(v2));
+      // the shading normal, normalised, where it has a length; else the geometric one
+      const F4 zero = {};
+      F4 nn = dot4(n, n);
+      const M4 has_n = nn > zero;
+      sqrt4(nn);
+      inv = 1.0f / nn;
+      F4 s[3];
+      for (int a = 0; a < 3; ++a) s[a] = select4(has_n, n[a] * inv, g[a]);
+      // camera rays are not unit length
+      F4 dir_len = dot4(d, d);
+      sqrt4(dir_len);
+      F4 vw[3];
+      for (int a = 0; a < 3; ++a) vw[a] = -d[a] / dir_len;
+      dist[h] = (F4)((M4)(from + t * dir_len) & lanes);
+      // the back side: the ray leaves a solid
+      const M4 back = dot4(g, vw) < zero;
+      for (int a = 0; a < 3; ++a) {
+        g[a] = select4(back, -g[a], g[a]);
+        s[a] = select4(back, -s[a], s[a]);
+      }
+      inside[h] = back & lanes;
+      // an interpolated normal facing away
+      const M4 away = dot4(s, vw) <= zero;
+      for (int a = 0; a < 3; ++a) {
+        ng[h][a] = (F4)((M4)g[a] & lanes);
+        ns[h][a] = (F4)((M4)select4(away, g[a], s[a]) & lanes);
+        view[h][a] = (F4)((M4)vw[a] & lanes);
+      }
+      magnitude[h] = (F4)((M4)magnitude[h] & lanes);
+    }
+  }
+
+  /// The shadow rays' origins: offset_ray_origin(p, ng, magnitude), side by side.
+  void origins() {
+    for (int h = 0; h < kQuarters; ++h) {
+      auto abs4 = [](F4 x) { return (F4)((M4)x & 0x7fffffff); };
+      const F4 m = max4(max4(abs4(p[h][0]), abs4(p[h][1])), max4(abs4(p[h][2]), magnitude[h]));
+      const F4 step = max4(m * 0x1p-18f, F4{} + 0x1p-100f);
+      for (int a = 0; a < 3; ++a) org[h][a] = p[h][a] + step * ng[h][a];
     }
   }
 };
@@ -338,7 +416,6 @@ class WaveTracer {
     (primary ? c_.primary_ticks : c_.secondary_ticks) += ticks_since(t0);
     (primary ? c_.primary : c_.secondary) += static_cast<uint64_t>(n);
 
-    Point pt[kPacketSize];
     glm::vec3 ambient[kPacketSize];  ///< what each hit reflects of the ambient light
     Triangle tris[kPacketSize];
     LaneMask hit_mask = 0;
@@ -354,41 +431,39 @@ class WaveTracer {
     uint32_t material_ids[kPacketSize];
     SurfaceInfo infos[kPacketSize];
     s_.surfaces->shade_packet(hp, hit_mask, tris, material_ids, infos);
-    for (int i = 0; i < n; ++i) {
-      if (!((hit_mask >> i) & 1u)) continue;
-      const Pending& r = rays[i];
-      const Triangle& tri = tris[i];
-      const float hu = hp.u[i], hv = hp.v[i], ht = hp.t[i];
-      Point& q = pt[i];
-      q.p = tri.v0 * (1.0f - hu - hv) + tri.v1 * hu + tri.v2 * hv;
-      q.ng = glm::normalize(tri.geometric_normal());
-      q.magnitude = std::max({max_abs(tri.v0), max_abs(tri.v1), max_abs(tri.v2)});
-      const SurfaceInfo& info = infos[i];
-      q.ns = glm::dot(info.normal, info.normal) > 0.0f ? glm::normalize(info.normal) : q.ng;
-      const float dir_len = glm::length(r.ray.dir);  // camera rays are not unit length
-      q.view = -r.ray.dir / dir_len;
-      q.dist = r.dist + ht * dir_len;
-      if (glm::dot(q.ng, q.view) < 0.0f) {  // the back side: the ray leaves a solid
-        q.ng = -q.ng;
-        q.ns = -q.ns;
-        q.inside = true;
+    // The hits' geometry side by side, then each hit's material and texture.
+    WaveLanes w;
+    w.geometry(tris, hp, rays, infos, hit_mask);
+    for (int i = 0; i < kPacketSize; ++i) {
+      const int h = i >> 2, k = i & 3;
+      if (!((hit_mask >> i) & 1u)) {
+        for (int a = 0; a < 3; ++a) w.diffuse[h][a][k] = w.specular[h][a][k] = 0.0f;
+        w.min_cos[h][k] = 2.0f;
+        w.shine[i] = 0.0f;
+        w.highlight[h][k] = 0;
+        w.m[i] = nullptr;
+        continue;
       }
-      if (glm::dot(q.ns, q.view) <= 0.0f) q.ns = q.ng;  // an interpolated normal facing away
-      q.m = &material(material_ids[i]);
-      const int32_t texture = info.texture >= 0 ? info.texture : q.m->texture;
+      const Material* m = &material(material_ids[i]);
+      const SurfaceInfo& info = infos[i];
+      const int32_t texture = info.texture >= 0 ? info.texture : m->texture;
       const bool textured = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size());
       const glm::vec3 tex = textured ? s_.textures[texture].sample_level(
-                                           info.uv, mip_level(r, ht, info, s_.textures[texture]))
+                                           info.uv, mip_level(rays[i], hp.t[i], info, s_.textures[texture]))
                                      : glm::vec3(1.0f);
-      q.diffuse = q.m->diffuse * tex;
-      q.specular = q.m->specular;
-      ambient[i] = s_.ambient * q.m->ambient * tex;
+      set_lane3(w.diffuse, i, m->diffuse * tex);
+      set_lane3(w.specular, i, m->specular);
+      ambient[i] = s_.ambient * m->ambient * tex;
+      const float mc = pre_.highlight_cos[static_cast<size_t>(material_ids[i])];
+      w.min_cos[h][k] = mc;
+      w.shine[i] = m->shine;
+      w.highlight[h][k] = (mc < 1.0f && max3(m->specular) > 0.0f) ? -1 : 0;
+      w.m[i] = m;
     }
 
     // Direct light. First every light's lanes, contributions and shadow rays, the lanes side by
     // side (one origin per hit), then all the shadow packets in one go, then the sums.
-    WaveLanes w;
-    w.gather(pt, hit_mask, pre_.highlight_cos, s_.materials.data(), has_shadows(o_.mode));
+    if (has_shadows(o_.mode)) w.origins();
     const size_t light_count = s_.lights.size();
     for (size_t li = 0; li < light_count; ++li) light_lanes(w, s_.lights[li], light_lanes_[li]);
     if (has_shadows(o_.mode)) {
@@ -421,25 +496,28 @@ class WaveTracer {
     if (!has_secondary(o_.mode)) return;
     for (int i = 0; i < n; ++i) {
       if (!((hit_mask >> i) & 1u) || rays[i].depth >= o_.max_depth) continue;
-      const Point& q = pt[i];
+      const Material& m = *w.m[i];
       const Pending& r = rays[i];
-      glm::vec3 kr = q.specular;
-      const float kt = q.m->transmittance;
+      const glm::vec3 view = lane3(w.view, i), ns = lane3(w.ns, i), ng = lane3(w.ng, i);
+      const bool inside = w.inside[i >> 2][i & 3] != 0;
+      const Origin at{lane3(w.p, i), w.magnitude[i >> 2][i & 3], w.dist[i >> 2][i & 3]};
+      glm::vec3 kr = m.specular;
+      const float kt = m.transmittance;
       if (kt > 0.0f) {
-        const float eta = q.inside ? q.m->ior : 1.0f / q.m->ior;
-        const float f = fresnel_dielectric(glm::dot(q.view, q.ns), eta);
+        const float eta = inside ? m.ior : 1.0f / m.ior;
+        const float f = fresnel_dielectric(glm::dot(view, ns), eta);
         kr += glm::vec3(kt * f);
         glm::vec3 dir;
         const glm::vec3 wt = r.weight * (kt * (1.0f - f));
-        if (f < 1.0f && max3(wt) > 0.0f && max3(wt) >= o_.min_weight && refract_direction(-q.view, q.ns, eta, dir)) {
-          push(next, q, -q.ng, dir, wt, r);
+        if (f < 1.0f && max3(wt) > 0.0f && max3(wt) >= o_.min_weight && refract_direction(-view, ns, eta, dir)) {
+          push(next, at, -ng, dir, wt, r);
         }
       }
       const glm::vec3 wr = r.weight * kr;
       if (max3(wr) > 0.0f && max3(wr) >= o_.min_weight) {
-        glm::vec3 dir = glm::reflect(-q.view, q.ns);
-        if (glm::dot(dir, q.ng) <= 0.0f) dir = glm::reflect(-q.view, q.ng);
-        push(next, q, q.ng, dir, wr, r);
+        glm::vec3 dir = glm::reflect(-view, ns);
+        if (glm::dot(dir, ng) <= 0.0f) dir = glm::reflect(-view, ng);
+        push(next, at, ng, dir, wr, r);
       }
     }
   }
@@ -530,7 +608,13 @@ class WaveTracer {
     return nearest_mip_level(footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height)));
   }
 
-  static void push(std::vector<Pending>& next, const Point& q, const glm::vec3& side, const glm::vec3& dir,
+  /// Where a secondary ray starts: the hit point, its triangle's largest coordinate, the path length.
+  struct Origin {
+    glm::vec3 p;
+    float magnitude, dist;
+  };
+
+  static void push(std::vector<Pending>& next, const Origin& q, const glm::vec3& side, const glm::vec3& dir,
                    const glm::vec3& weight, const Pending& from) {
     Pending& s = next.emplace_back();
     s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
