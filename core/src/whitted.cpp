@@ -179,12 +179,13 @@ struct Pending {
 
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
-// The light loop works on four lanes side by side (GCC vector extensions: one SSE register on the
-// x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes with the same
-// operations, in the same order, as scalar code would, so the result does not depend on the grouping.
+// The hits' geometry and the light loop work on four lanes side by side (GCC vector extensions: one
+// SSE register on the x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes
+// with the same operations, in the same order, as scalar code would, so the result does not depend
+// on the grouping.
 typedef float F4 __attribute__((vector_size(16)));
 typedef int32_t M4 __attribute__((vector_size(16)));
-static_assert(kPacketSize % 4 == 0, "the light loop works on a wave in quarters of 4 lanes");
+static_assert(kPacketSize % 4 == 0, "the shading works on a wave in quarters of 4 lanes");
 constexpr int kQuarters = kPacketSize / 4;
 
 /// Square roots in place.
