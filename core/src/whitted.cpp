@@ -450,7 +450,7 @@ class WaveTracer {
       const int32_t texture = info.texture >= 0 ? info.texture : m->texture;
       const bool textured = texture >= 0 && texture < static_cast<int32_t>(s_.textures.size());
       const glm::vec3 tex = textured ? s_.textures[texture].sample_level(
-                                           info.uv, mip_level(rays[i], hp.t[i], info, s_.textures[texture]))
+                                           info.uv, mip_level(w.dist[h][k], info, s_.textures[texture]))
                                      : glm::vec3(1.0f);
       set_lane3(w.diffuse, i, m->diffuse * tex);
       set_lane3(w.specular, i, m->specular);
@@ -601,11 +601,12 @@ class WaveTracer {
     }
   }
 
-  /// Mip level: the one nearest to log2 of the texels a pixel's footprint covers at the hit (the
-  /// footprint grows with the path length; reflections and refractions are treated as flat).
-  int mip_level(const Pending& r, float t, const SurfaceInfo& info, const Texture& tex) const {
+  /// Mip level: the one nearest to log2 of the texels a pixel's footprint covers at a hit `dist`
+  /// along its path from the eye (the footprint grows with the path length; reflections and
+  /// refractions are treated as flat).
+  int mip_level(float dist, const SurfaceInfo& info, const Texture& tex) const {
     if (spread_ <= 0.0f || info.uv_per_world <= 0.0f) return 0;
-    const float footprint = spread_ * (r.dist + t * glm::length(r.ray.dir));
+    const float footprint = spread_ * dist;
     return nearest_mip_level(footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height)));
   }
 
