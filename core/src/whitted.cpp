@@ -247,13 +247,44 @@ struct WaveLanes {
   void geometry(const Triangle* tris, const HitPacket& hp, const Pending* rays, const SurfaceInfo* infos,
                 LaneMask hit_mask) {
     for (int h = 0; h < kQuarters; ++h) {
-      F4 v0[3] = {}, v1[3] = {}, v2[3] = {}, n[3] = {}, d[3] = {};
-      F4 u = {}, v = {}, t = {}, from = {};
+      F4 v0[3], v1[3], v2[3], n[3], d[3];
+      F4 u, v, t, from = {};
       M4 lanes = {};
+      std::memcpy(&u, &hp.u[4 * h], sizeof(F4));  // lanes without a hit are masked off below
+      std::memcpy(&v, &hp.v[4 * h], sizeof(F4));
+      std::memcpy(&t, &hp.t[4 * h], sizeof(F4));
+#if defined(__SSE__)
+      // each lane's three coordinates as a row of four floats (the fourth is the next field's),
+      // transposed into three columns; lanes without a hit are rows of zeros
+      __m128 rows[5][4];
+      for (int k = 0; k < 4; ++k) {
+        const int i = 4 * h + k;
+        if (!((hit_mask >> i) & 1u)) {
+          for (auto& r : rows) r[k] = _mm_setzero_ps();
+          continue;
+        }
+        lanes[k] = -1;
+        from[k] = rays[i].dist;
+        const Triangle& tri = tris[i];
+        rows[0][k] = _mm_loadu_ps(&tri.v0.x);
+        rows[1][k] = _mm_loadu_ps(&tri.v1.x);
+        const __m128 last = _mm_loadu_ps(&tri.v1.z);  // v1.z, v2: the triangle's last four floats
+        rows[2][k] = _mm_shuffle_ps(last, last, _MM_SHUFFLE(3, 3, 2, 1));
+        rows[3][k] = _mm_loadu_ps(&infos[i].normal.x);
+        rows[4][k] = _mm_loadu_ps(&rays[i].ray.dir.x);
+      }
+      F4(*const cols[5])[3] = {&v0, &v1, &v2, &n, &d};
+      for (int r = 0; r < 5; ++r) {
+        _MM_TRANSPOSE4_PS(rows[r][0], rows[r][1], rows[r][2], rows[r][3]);
+        for (int a = 0; a < 3; ++a) (*cols[r])[a] = (F4)rows[r][a];
+      }
+#else
+      for (int a = 0; a < 3; ++a) v0[a] = v1[a] = v2[a] = n[a] = d[a] = F4{};
       for (int k = 0; k < 4; ++k) {
         const int i = 4 * h + k;
         if (!((hit_mask >> i) & 1u)) continue;
         lanes[k] = -1;
+        from[k] = rays[i].dist;
         const Triangle& tri = tris[i];
         for (int a = 0; a < 3; ++a) {
           v0[a][k] = tri.v0[a];
@@ -262,11 +293,8 @@ struct WaveLanes {
           n[a][k] = infos[i].normal[a];
           d[a][k] = rays[i].ray.dir[a];
         }
-        u[k] = hp.u[i];
-        v[k] = hp.v[i];
-        t[k] = hp.t[i];
-        from[k] = rays[i].dist;
       }
+#endif
       hit[h] = lanes;
       const F4 w = (1.0f - u) - v;
       F4 e1[3], e2[3];
