@@ -613,10 +613,12 @@ class WaveTracer {
       // one traversal that sees through the marked glass and multiplies its transmittance; the
       // rare unsure lanes are walked
       const LaneMask unsure = s_.geometry->transmittance(shadow, lit, trans, &hint);
-      for (int i = 0; i < kPacketSize; ++i) {
-        if ((unsure >> i) & 1u) trans[i] = 0.0f;
+      if (unsure) {
+        for (int i = 0; i < kPacketSize; ++i) {
+          if ((unsure >> i) & 1u) trans[i] = 0.0f;
+        }
+        transmission(shadow, unsure, trans);
       }
-      if (unsure) transmission(shadow, unsure, trans);
     } else {
       const LaneMask blocked = s_.geometry->occluded(shadow, lit, &hint);
       LaneMask walk = 0;
