@@ -429,7 +429,7 @@ class WaveTracer {
 
   void wave(const Pending* rays, int n, glm::vec3* color, std::vector<Pending>& next) {
     RayPacket rp;
-    HitPacket hp;
+    HitPacket hp{};  // every lane defined: the hit geometry reads the lanes four at a time
     const LaneMask mask = n == kPacketSize ? kAllLanes : (1u << n) - 1u;
     for (int i = 0; i < n; ++i) rp.set(i, rays[i].ray);
     const bool primary = rays[0].depth == 0;
