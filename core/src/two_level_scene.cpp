@@ -1,10 +1,8 @@
 #include "artrace/core/two_level_scene.h"
 #include "kernels.h"
+#include "quarters.h"
 
 #include <algorithm>
-#if defined(__SSE2__)
-#include <immintrin.h>
-#endif
 #include <stdexcept>
 
 namespace artrace::core {
@@ -298,86 +296,38 @@ bool TwoLevelScene::occluded(const Ray& ray) const {
 
 namespace {
 
-// Per-lane bookkeeping of a packet's results (kPacketSize lanes, a multiple of 4), four lanes at a
-// time where SSE is there: a loop over 16 lanes with a branch each costs more than the rest of a
-// two-level shadow call's own work.
-static_assert(kPacketSize % 4 == 0, "packets are handled in quarters of 4 lanes");
-
-#if defined(__SSE2__)
-/// All-ones in lane i of entry b when bit i of b is set.
-alignas(16) constexpr int32_t kQuarterMasks[16][4] = {
-    {0, 0, 0, 0},   {-1, 0, 0, 0},   {0, -1, 0, 0},   {-1, -1, 0, 0},   {0, 0, -1, 0},   {-1, 0, -1, 0},
-    {0, -1, -1, 0}, {-1, -1, -1, 0}, {0, 0, 0, -1},   {-1, 0, 0, -1},   {0, -1, 0, -1},  {-1, -1, 0, -1},
-    {0, 0, -1, -1}, {-1, 0, -1, -1}, {0, -1, -1, -1}, {-1, -1, -1, -1}};
-
-inline __m128 quarter_mask(LaneMask mask, int h) {
-  return _mm_load_ps(reinterpret_cast<const float*>(kQuarterMasks[(mask >> (4 * h)) & 15u]));
-}
-#endif
+// Per-lane bookkeeping of a packet's results, a quarter at a time (quarters.h): a loop over the 16
+// lanes with a branch each cost more than the rest of a two-level shadow call's own work. The
+// lanes outside `mask` are read and written back unchanged.
 
 /// trans[i] = 1 for the lanes of `mask`.
 inline void set_one(LaneMask mask, float* trans) {
-#if defined(__SSE2__)
-  for (int h = 0; h < kPacketSize / 4; ++h) {
-    const __m128 m = quarter_mask(mask, h);
-    const __m128 t = _mm_loadu_ps(trans + 4 * h);
-    _mm_storeu_ps(trans + 4 * h, _mm_or_ps(_mm_and_ps(m, _mm_set1_ps(1.0f)), _mm_andnot_ps(m, t)));
+  for (int h = 0; h < kQuarters; ++h) {
+    store4(trans, h, select4(mask4(mask >> (4 * h)), F4{} + 1.0f, load4<F4>(trans, h)));
   }
-#else
-  for (int i = 0; i < kPacketSize; ++i) {
-    if ((mask >> i) & 1u) trans[i] = 1.0f;
-  }
-#endif
 }
 
 /// The lanes of `mask` whose trans[i] > 0.
 inline LaneMask positive(LaneMask mask, const float* trans) {
   LaneMask out = 0;
-#if defined(__SSE2__)
-  for (int h = 0; h < kPacketSize / 4; ++h) {
-    const int bits = _mm_movemask_ps(_mm_cmpgt_ps(_mm_loadu_ps(trans + 4 * h), _mm_setzero_ps()));
-    out |= static_cast<LaneMask>(bits) << (4 * h);
-  }
-#else
-  for (int i = 0; i < kPacketSize; ++i) out |= static_cast<LaneMask>(trans[i] > 0.0f) << i;
-#endif
+  for (int h = 0; h < kQuarters; ++h) out |= bits4(load4<F4>(trans, h) > F4{}) << (4 * h);
   return out & mask;
 }
 
 /// trans[i] *= by[i] for the lanes of `mask`.
 inline void multiply(LaneMask mask, float* trans, const float* by) {
-#if defined(__SSE2__)
-  for (int h = 0; h < kPacketSize / 4; ++h) {
-    const __m128 m = quarter_mask(mask, h);
-    const __m128 t = _mm_loadu_ps(trans + 4 * h);
-    const __m128 p = _mm_mul_ps(t, _mm_loadu_ps(by + 4 * h));
-    _mm_storeu_ps(trans + 4 * h, _mm_or_ps(_mm_and_ps(m, p), _mm_andnot_ps(m, t)));
+  for (int h = 0; h < kQuarters; ++h) {
+    const F4 t = load4<F4>(trans, h);
+    store4(trans, h, select4(mask4(mask >> (4 * h)), t * load4<F4>(by, h), t));
   }
-#else
-  for (int i = 0; i < kPacketSize; ++i) {
-    if ((mask >> i) & 1u) trans[i] *= by[i];
-  }
-#endif
 }
 
 /// hits.inst[i] = kStaticObject for the lanes of `mask` with a hit.
 inline void mark_static(LaneMask mask, HitPacket& hits) {
-#if defined(__SSE2__)
-  for (int h = 0; h < kPacketSize / 4; ++h) {
-    const __m128i m = _mm_castps_si128(quarter_mask(mask, h));
-    const __m128i prim = _mm_loadu_si128(reinterpret_cast<const __m128i*>(hits.prim + 4 * h));
-    const __m128i none = _mm_set1_epi32(static_cast<int32_t>(kInvalidId));
-    const __m128i hit = _mm_andnot_si128(_mm_cmpeq_epi32(prim, none), m);
-    __m128i* inst = reinterpret_cast<__m128i*>(hits.inst + 4 * h);
-    const __m128i old = _mm_loadu_si128(inst);
-    const __m128i mark = _mm_set1_epi32(static_cast<int32_t>(kStaticObject));
-    _mm_storeu_si128(inst, _mm_or_si128(_mm_and_si128(hit, mark), _mm_andnot_si128(hit, old)));
+  for (int h = 0; h < kQuarters; ++h) {
+    const M4 hit = mask4(mask >> (4 * h)) & (load4<M4>(hits.prim, h) != static_cast<int32_t>(kInvalidId));
+    store4(hits.inst, h, select4(hit, M4{} + static_cast<int32_t>(kStaticObject), load4<M4>(hits.inst, h)));
   }
-#else
-  for (int i = 0; i < kPacketSize; ++i) {
-    if (((mask >> i) & 1u) && hits.prim[i] != kInvalidId) hits.inst[i] = kStaticObject;
-  }
-#endif
 }
 
 }  // namespace
@@ -390,6 +340,7 @@ void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& h
     mark_static(mask, hits);
   } else {
     for (int i = 0; i < kPacketSize; ++i) {
+      if (!((mask >> i) & 1u)) continue;  // the other lanes keep what they hold, as above
       hits.t[i] = rays.tmax[i];
       hits.u[i] = hits.v[i] = 0.0f;
       hits.prim[i] = hits.inst[i] = kInvalidId;
@@ -413,12 +364,14 @@ LaneMask TwoLevelScene::occluded(const RayPacket& rays, LaneMask mask, ShadowHin
 LaneMask TwoLevelScene::transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint) const {
   require_committed(dirty_);
   mask &= kAllLanes;
-  set_one(mask, trans);
   LaneMask unsure = 0;
   if (config_ == Config::kKdTreeBvh && !kd_.prim_refs().empty() && mask != 0) {
+    // the kernel writes every lane of `mask`
     KdTreeView kd = kd_.view(hint);
     kd.pass = static_pass_.empty() ? nullptr : static_pass_.data();
     unsure = packet_kernels().transmittance(kd, rays, mask, trans);
+  } else {
+    set_one(mask, trans);
   }
   const LaneMask rest = positive(mask, trans);
   if (top_.empty() || rest == 0) return unsure;

@@ -1,5 +1,6 @@
 #include "artrace/core/whitted.h"
 #include "kernels.h"
+#include "quarters.h"
 
 #include <tbb/enumerable_thread_specific.h>
 
@@ -179,34 +180,7 @@ struct Pending {
 
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
-// The hits' geometry and the light loop work on four lanes side by side (GCC vector extensions: one
-// SSE register on the x86-64 baseline), a wave of kPacketSize lanes as quarters. Every lane computes
-// with the same operations, in the same order, as scalar code would, so the result does not depend
-// on the grouping.
-typedef float F4 __attribute__((vector_size(16)));
-typedef int32_t M4 __attribute__((vector_size(16)));
-static_assert(kPacketSize % 4 == 0, "the shading works on a wave in quarters of 4 lanes");
-constexpr int kQuarters = kPacketSize / 4;
-
-/// Square roots in place.
-inline void sqrt4(F4& x) {
-#if defined(__SSE__)
-  x = (F4)_mm_sqrt_ps((__m128)x);
-#else
-  for (int i = 0; i < 4; ++i) x[i] = std::sqrt(x[i]);
-#endif
-}
-
-/// Bit i set when lane i of the mask is set.
-inline uint32_t bits4(M4 m) {
-#if defined(__SSE__)
-  return static_cast<uint32_t>(_mm_movemask_ps((__m128)m));
-#else
-  uint32_t b = 0;
-  for (int i = 0; i < 4; ++i) b |= (m[i] != 0 ? 1u : 0u) << i;
-  return b;
-#endif
-}
+// The hits' geometry and the light loop work on a wave's lanes in quarters (quarters.h).
 
 /// Lane i of a quarter-grouped vector.
 inline glm::vec3 lane3(const F4 (&v)[kQuarters][3], int i) {
@@ -218,15 +192,6 @@ inline void set_lane3(F4 (&v)[kQuarters][3], int i, const glm::vec3& x) {
   const int h = i >> 2, k = i & 3;
   for (int a = 0; a < 3; ++a) v[h][a][k] = x[a];
 }
-
-/// a < b ? b : a, lane by lane (std::max's rule).
-inline F4 max4(F4 a, F4 b) { return (F4)(((M4)b & (a < b)) | ((M4)a & ~(a < b))); }
-
-/// mask ? a : b, lane by lane.
-inline F4 select4(M4 mask, F4 a, F4 b) { return (F4)(((M4)a & mask) | ((M4)b & ~mask)); }
-
-/// glm's dot of three-vectors: (x x' + y y') + z z'.
-inline F4 dot4(const F4* a, const F4* b) { return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]; }
 
 /// The shaded hits of a wave as structure of arrays (quarters of 4 lanes, one SSE register each).
 /// The geometry is worked out side by side with the operations, in the order, of the scalar glm
@@ -248,11 +213,10 @@ struct WaveLanes {
                 LaneMask hit_mask) {
     for (int h = 0; h < kQuarters; ++h) {
       F4 v0[3], v1[3], v2[3], n[3], d[3];
-      F4 u, v, t, from = {};
+      // lanes without a hit are masked off below
+      const F4 u = load4<F4>(hp.u, h), v = load4<F4>(hp.v, h), t = load4<F4>(hp.t, h);
+      F4 from = {};
       M4 lanes = {};
-      std::memcpy(&u, &hp.u[4 * h], sizeof(F4));  // lanes without a hit are masked off below
-      std::memcpy(&v, &hp.v[4 * h], sizeof(F4));
-      std::memcpy(&t, &hp.t[4 * h], sizeof(F4));
 #if defined(__SSE__)
       // each lane's three coordinates as a row of four floats (the fourth is the next field's),
       // transposed into three columns; lanes without a hit are rows of zeros
@@ -310,11 +274,7 @@ struct WaveLanes {
       F4 inv = 1.0f / len;
       for (int a = 0; a < 3; ++a) g[a] = g[a] * inv;
       // std::max({|x|, |y|, |z|}) of each vertex, then of the three
-      auto max_abs = [](const F4* c) {
-        F4 m = (F4)((M4)c[0] & 0x7fffffff);
-        m = max4(m, (F4)((M4)c[1] & 0x7fffffff));
-        return max4(m, (F4)((M4)c[2] & 0x7fffffff));
-      };
+      auto max_abs = [](const F4* c) { return max4(max4(abs4(c[0]), abs4(c[1])), abs4(c[2])); };
       magnitude[h] = max4(max4(max_abs(v0), max_abs(v1)), max_abs(v2));
       // the shading normal, normalised, where it has a length; else the geometric one
       const F4 zero = {};
@@ -348,12 +308,13 @@ struct WaveLanes {
     }
   }
 
-  /// The shadow rays' origins: offset_ray_origin(p, ng, magnitude), side by side.
+  /// The shadow rays' origins: offset_ray_origin(p, ng, magnitude) four lanes at a time, the
+  /// same operations in the same order (calling it lane by lane: 0.9-1.3% more render
+  /// instructions).
   void origins() {
     for (int h = 0; h < kQuarters; ++h) {
-      auto abs4 = [](F4 x) { return (F4)((M4)x & 0x7fffffff); };
       const F4 m = max4(max4(abs4(p[h][0]), abs4(p[h][1])), max4(abs4(p[h][2]), magnitude[h]));
-      const F4 step = max4(m * 0x1p-18f, F4{} + 0x1p-100f);
+      const F4 step = max4(m * kOffsetScale, F4{} + kOffsetFloor);
       for (int a = 0; a < 3; ++a) org[h][a] = p[h][a] + step * ng[h][a];
     }
   }
@@ -509,8 +470,7 @@ class WaveTracer {
       const LightLanes& ll = light_lanes_[li];
       if (!ll.lit) continue;
       for (int h = 0; h < kQuarters; ++h) {
-        F4 trans;
-        std::memcpy(&trans, &ll.trans[4 * h], sizeof(F4));
+        const F4 trans = load4<F4>(ll.trans, h);
         for (int a = 0; a < 3; ++a) direct[h][a] += ll.contrib[h][a] * trans;
       }
     }

@@ -160,6 +160,76 @@ TEST(TwoLevelScene, PacketsEqualSingleRays) {
   set_simd_level(saved);
 }
 
+/// Partial masks, both configurations, every kernel: the lanes in the mask get the full packet's
+/// answers (closest hits and transmittance), the lanes outside keep what the caller left there.
+TEST(TwoLevelScene, PartialMasksAnswerTheirLanesAndLeaveTheOthers) {
+  std::mt19937 rng(45);
+  const std::vector<Triangle> ground = test::random_soup(rng, 2000, 0.4f);
+  const std::vector<Triangle> ball = test::closed_sphere({0, 0, 0}, 1.0f, 12);
+  std::vector<float> ground_pass(ground.size()), ball_pass(ball.size());
+  for (size_t k = 0; k < ground.size(); ++k) ground_pass[k] = k % 3 == 0 ? 0.0f : 0.5f;
+  for (size_t k = 0; k < ball.size(); ++k) ball_pass[k] = k % 2 == 0 ? 0.0f : 0.7f;
+  const SimdLevel saved = simd_level();
+  for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
+    TwoLevelScene scene(config);
+    scene.set_static(ground);
+    scene.set_static_transmittance(ground_pass);
+    const MeshHandle mesh = scene.add_rigid_mesh(ball);
+    scene.set_mesh_transmittance(mesh, ball_pass);
+    for (int i = 0; i < 6; ++i) scene.add_instance(mesh, glm::translate(glm::mat4(1.0f), test::random_point(rng, 0, 10)));
+    scene.commit();
+    for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
+      if (!simd_level_supported(level)) continue;
+      set_simd_level(level);
+      size_t inside = 0, hit = 0;
+      for (int p = 0; p < 200; ++p) {
+        RayPacket packet;
+        const glm::vec3 light = test::random_point(rng, 0.0f, 10.0f);
+        for (int i = 0; i < kPacketSize; ++i) {
+          const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+          packet.set(i, Ray{o, light - o, 0.0f, 1.0f});
+        }
+        HitPacket all;
+        float all_trans[kPacketSize];
+        scene.intersect(packet, kAllLanes, all);
+        const LaneMask all_unsure = scene.transmittance(packet, kAllLanes, all_trans);
+        for (const LaneMask mask : {0xb5u, 0xa600u, 0x0001u, 0x8000u, 0x7ffeu}) {
+          HitPacket hits;
+          float trans[kPacketSize];
+          for (int i = 0; i < kPacketSize; ++i) {
+            hits.t[i] = -3.0f, hits.u[i] = -4.0f, hits.v[i] = -5.0f, hits.prim[i] = 777u, hits.inst[i] = 888u;
+            trans[i] = -7.0f;
+          }
+          scene.intersect(packet, mask, hits);
+          const LaneMask unsure = scene.transmittance(packet, mask, trans);
+          EXPECT_EQ(unsure & ~mask, 0u);
+          for (int i = 0; i < kPacketSize; ++i) {
+            if (!((mask >> i) & 1u)) {
+              ASSERT_EQ(hits.t[i], -3.0f) << to_string(level) << " mask " << mask << " lane " << i;
+              ASSERT_EQ(hits.u[i], -4.0f);
+              ASSERT_EQ(hits.v[i], -5.0f);
+              ASSERT_EQ(hits.prim[i], 777u);
+              ASSERT_EQ(hits.inst[i], 888u);
+              ASSERT_EQ(trans[i], -7.0f) << to_string(level) << " mask " << mask << " lane " << i;
+              continue;
+            }
+            ++inside;
+            ASSERT_EQ(hits.prim[i], all.prim[i]) << to_string(level) << " mask " << mask << " lane " << i;
+            ASSERT_EQ(hits.inst[i], all.inst[i]);
+            ASSERT_EQ(hits.t[i], all.t[i]);
+            hit += hits.prim[i] != kInvalidId;
+            if (!((unsure >> i) & 1u) && !((all_unsure >> i) & 1u)) {
+              ASSERT_EQ(trans[i], all_trans[i]) << to_string(level) << " mask " << mask << " lane " << i;
+            }
+          }
+        }
+      }
+      EXPECT_GT(hit, inside / 10) << "the rays must hit something";
+    }
+  }
+  set_simd_level(saved);
+}
+
 /// Transmittance of a segment by brute force: every triangle tested on its own; crossings at the
 /// same distance (an edge shared by two triangles of one pane) count once, as when walking.
 float transmittance_brute_force(const Ray& r, const std::vector<Triangle>& tris, const std::vector<float>& pass) {

@@ -112,6 +112,7 @@ class TwoLevelScene {
   /// `deformable_object_id(handle)`.
   Hit intersect(const Ray& ray) const;
   bool occluded(const Ray& ray) const;
+  /// Closest hits of the lanes in `mask`; the other lanes of `hits` keep what they hold.
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
   /// `hint` (optional, see ShadowHint) serves the static kd-tree of the kdtree+bvh configuration.
   LaneMask occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint = nullptr) const;
@@ -131,6 +132,7 @@ class TwoLevelScene {
   /// transmittance of every transmissive triangle the segment (tmin, tmax] crosses, each once, or
   /// 0 when it crosses an opaque one. Returns the lanes whose answer is unsure (a packet crossing
   /// more than 16 distinct transmissive triangles of the static kd-tree; walk those instead).
+  /// The other lanes of `trans` keep what they hold.
   LaneMask transmittance(const RayPacket& rays, LaneMask mask, float* trans, ShadowHint* hint = nullptr) const;
 
   /// The triangle a hit names, in world space (inline: the shader asks for every hit's).

@@ -136,6 +136,11 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
 /// Radiance along one ray with the same shading (for tests and single-pixel probes).
 glm::vec3 trace_whitted(const ShadingScene& scene, const Ray& ray, const WhittedOptions& opt);
 
+/// offset_ray_origin's step: this fraction of the largest coordinate (about 64 ulps), at least
+/// kOffsetFloor. (The shader's four-lane copy of the function uses the same two constants.)
+inline constexpr float kOffsetScale = 0x1p-18f;
+inline constexpr float kOffsetFloor = 0x1p-100f;
+
 /// `p` moved off its surface along unit `n` (the side the new ray leaves from) by about 64 ulps of
 /// the largest of its coordinates and `magnitude` (the largest coordinate of its triangle).
 /// Inline: the shader offsets every shadow origin and secondary ray.
@@ -145,7 +150,7 @@ inline glm::vec3 offset_ray_origin(const glm::vec3& p, const glm::vec3& n, float
   // far from the origin has error in z of the order of ulp(x)), so the step is taken relative to
   // the largest coordinate of the point and of its triangle: 2^-18 of it, about 64 ulps.
   const float m = std::max(std::max(std::fabs(p.x), std::fabs(p.y)), std::max(std::fabs(p.z), magnitude));
-  const float d = std::max(m * 0x1p-18f, 0x1p-100f);
+  const float d = std::max(m * kOffsetScale, kOffsetFloor);
   return p + d * n;
 }
 
