@@ -160,6 +160,20 @@ TEST(TwoLevelScene, PacketsEqualSingleRays) {
   set_simd_level(saved);
 }
 
+/// A scene of a static soup and instances of one mesh, both with per-triangle transmittance.
+TwoLevelScene transmissive_scene(Config config, const std::vector<Triangle>& ground, const std::vector<float>& ground_pass,
+                                 const std::vector<Triangle>& object, const std::vector<float>& object_pass,
+                                 const std::vector<glm::mat4>& placements) {
+  TwoLevelScene scene(config);
+  scene.set_static(ground);
+  scene.set_static_transmittance(ground_pass);
+  const MeshHandle mesh = scene.add_rigid_mesh(object);
+  scene.set_mesh_transmittance(mesh, object_pass);
+  for (const glm::mat4& m : placements) scene.add_instance(mesh, m);
+  scene.commit();
+  return scene;
+}
+
 /// Partial masks, both configurations, every kernel: the lanes in the mask get the full packet's
 /// answers (closest hits and transmittance), the lanes outside keep what the caller left there.
 TEST(TwoLevelScene, PartialMasksAnswerTheirLanesAndLeaveTheOthers) {
@@ -170,14 +184,10 @@ TEST(TwoLevelScene, PartialMasksAnswerTheirLanesAndLeaveTheOthers) {
   for (size_t k = 0; k < ground.size(); ++k) ground_pass[k] = k % 3 == 0 ? 0.0f : 0.5f;
   for (size_t k = 0; k < ball.size(); ++k) ball_pass[k] = k % 2 == 0 ? 0.0f : 0.7f;
   const SimdLevel saved = simd_level();
+  std::vector<glm::mat4> placements;
+  for (int i = 0; i < 6; ++i) placements.push_back(glm::translate(glm::mat4(1.0f), test::random_point(rng, 0, 10)));
   for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
-    TwoLevelScene scene(config);
-    scene.set_static(ground);
-    scene.set_static_transmittance(ground_pass);
-    const MeshHandle mesh = scene.add_rigid_mesh(ball);
-    scene.set_mesh_transmittance(mesh, ball_pass);
-    for (int i = 0; i < 6; ++i) scene.add_instance(mesh, glm::translate(glm::mat4(1.0f), test::random_point(rng, 0, 10)));
-    scene.commit();
+    const TwoLevelScene scene = transmissive_scene(config, ground, ground_pass, ball, ball_pass, placements);
     for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
       if (!simd_level_supported(level)) continue;
       set_simd_level(level);
@@ -270,13 +280,7 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
 
   const SimdLevel saved = simd_level();
   for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
-    TwoLevelScene scene(config);
-    scene.set_static(ground);
-    scene.set_static_transmittance(ground_pass);
-    const MeshHandle mesh = scene.add_rigid_mesh(object);
-    scene.set_mesh_transmittance(mesh, object_pass);
-    scene.add_instance(mesh, glm::mat4(1.0f));
-    scene.commit();
+    const TwoLevelScene scene = transmissive_scene(config, ground, ground_pass, object, object_pass, {glm::mat4(1.0f)});
     ASSERT_TRUE(scene.has_transmittance());
     for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
       if (!simd_level_supported(level)) continue;
