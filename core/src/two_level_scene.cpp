@@ -3,6 +3,7 @@
 #include "quarters.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace artrace::core {
@@ -13,6 +14,74 @@ void set_rows(float out[12], const glm::mat4& m) {
     for (int c = 0; c < 4; ++c) out[4 * r + c] = m[c][r];
   }
 }
+
+/// The top level: a binary tree over the objects' world boxes, one object a leaf, each split the
+/// SAH's best over every cut of the objects sorted by their centres on each axis (ties by index:
+/// the same tree every time). An object costs a transform and a BVH traversal, far more than a
+/// box test, so no leaf holds two. Tens to hundreds of objects: O(n log^2 n) is microseconds.
+class TopBuilder {
+ public:
+  TopBuilder(const std::vector<InstanceData>& data, std::vector<uint32_t>& order, std::vector<TopNode>& top)
+      : data_(data), order_(order), top_(top), right_area_(data.size()) {
+    centres_.reserve(data.size());
+    for (const InstanceData& d : data) centres_.push_back(d.world_bounds.lo + d.world_bounds.hi);
+  }
+
+  void build(uint32_t node, uint32_t begin, uint32_t end, int depth) {
+    Aabb box;
+    for (uint32_t i = begin; i < end; ++i) box.extend(data_[order_[i]].world_bounds);
+    top_[node].bounds = box;
+    const uint32_t n = end - begin;
+    if (n <= 1 || depth >= 48) {
+      top_[node].first = begin;
+      top_[node].count = static_cast<uint16_t>(n);
+      return;
+    }
+    float best_cost = kInfinity;
+    int axis = 0;
+    uint32_t split = n / 2;
+    for (int a = 0; a < 3; ++a) {
+      sort(begin, end, a);
+      Aabb right;
+      for (uint32_t k = n - 1; k > 0; --k) {
+        right.extend(data_[order_[begin + k]].world_bounds);
+        right_area_[k] = right.surface_area();
+      }
+      Aabb left;
+      for (uint32_t k = 1; k < n; ++k) {
+        left.extend(data_[order_[begin + k - 1]].world_bounds);
+        const float cost = left.surface_area() * static_cast<float>(k) + right_area_[k] * static_cast<float>(n - k);
+        if (cost < best_cost) {
+          best_cost = cost;
+          axis = a;
+          split = k;
+        }
+      }
+    }
+    if (axis != 2) sort(begin, end, axis);
+    const uint32_t child = static_cast<uint32_t>(top_.size());
+    top_.resize(child + 2);
+    top_[node].first = child;
+    top_[node].count = 0;
+    top_[node].axis = static_cast<uint16_t>(axis);
+    build(child, begin, begin + split, depth + 1);
+    build(child + 1, begin + split, end, depth + 1);
+  }
+
+ private:
+  void sort(uint32_t begin, uint32_t end, int axis) {
+    std::sort(order_.begin() + begin, order_.begin() + end, [&](uint32_t a, uint32_t b) {
+      const float ca = centres_[a][axis], cb = centres_[b][axis];
+      return ca < cb || (ca == cb && a < b);
+    });
+  }
+
+  const std::vector<InstanceData>& data_;
+  std::vector<uint32_t>& order_;
+  std::vector<TopNode>& top_;
+  std::vector<glm::vec3> centres_;  ///< per object: twice the centre of its world box
+  std::vector<float> right_area_;   ///< scratch: the area of the objects from k on
+};
 
 }  // namespace
 
@@ -209,6 +278,11 @@ void TwoLevelScene::commit() {
     d.bvh.pass = pass.empty() ? nullptr : pass.data();
     set_rows(d.object_from_world, glm::inverse(world_from_object));
     d.world_bounds = transform_box(bvh.bounds(), world_from_object);
+    // An object whose world box is not finite (a NaN or infinite transform, or infinite
+    // vertices) is left out: a ray could not hit it anyway, and a NaN box lets every ray in.
+    for (int a = 0; a < 3; ++a) {
+      if (!std::isfinite(d.world_bounds.lo[a]) || !std::isfinite(d.world_bounds.hi[a])) return;
+    }
     d.id = id;
     data_.push_back(d);
   };
@@ -232,39 +306,9 @@ void TwoLevelScene::commit() {
   top_.clear();
   if (!data_.empty()) {
     top_.emplace_back();
-    build_top(0, 0, static_cast<uint32_t>(data_.size()), 0);
+    TopBuilder(data_, order_, top_).build(0, 0, static_cast<uint32_t>(data_.size()), 0);
   }
   dirty_ = false;
-}
-
-void TwoLevelScene::build_top(uint32_t node, uint32_t begin, uint32_t end, int depth) {
-  Aabb box, centres;
-  for (uint32_t i = begin; i < end; ++i) {
-    box.extend(data_[order_[i]].world_bounds);
-    const Aabb& b = data_[order_[i]].world_bounds;
-    centres.extend(0.5f * (b.lo + b.hi));
-  }
-  top_[node].bounds = box;
-  if (end - begin <= 2 || depth >= 48) {
-    top_[node].first = begin;
-    top_[node].count = static_cast<uint16_t>(end - begin);
-    return;
-  }
-  const glm::vec3 e = centres.extent();
-  const int axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
-  const uint32_t mid = begin + (end - begin) / 2;
-  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end, [&](uint32_t a, uint32_t b) {
-    const float ca = data_[a].world_bounds.lo[axis] + data_[a].world_bounds.hi[axis];
-    const float cb = data_[b].world_bounds.lo[axis] + data_[b].world_bounds.hi[axis];
-    return ca < cb || (ca == cb && a < b);
-  });
-  const uint32_t child = static_cast<uint32_t>(top_.size());
-  top_.resize(child + 2);
-  top_[node].first = child;
-  top_[node].count = 0;
-  top_[node].axis = static_cast<uint16_t>(axis);
-  build_top(child, begin, mid, depth + 1);
-  build_top(child + 1, mid, end, depth + 1);
 }
 
 namespace {

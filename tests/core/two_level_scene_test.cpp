@@ -6,6 +6,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 
 #include <algorithm>
+#include <limits>
 #include <utility>
 
 namespace artrace::core {
@@ -72,6 +73,43 @@ TEST(TwoLevelScene, InstancesMatchFlattenedGeometry) {
     scene.commit();
     expect_matches_flat(scene, flat, test::random_rays(rng, 6000), 6,
                         config == Config::kBvh ? "bvh" : "kdtree+bvh");
+  }
+}
+
+/// A top level over many objects (its SAH splits) finds what the flattened geometry holds; objects
+/// with a NaN transform are never hit and do not upset the others or the top level's build.
+TEST(TwoLevelScene, ManyObjectsAndNaNTransforms) {
+  std::mt19937 rng(43);
+  const auto object = test::closed_sphere({0, 0, 0}, 0.6f, 8);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (const Config config : {Config::kKdTreeBvh, Config::kBvh}) {
+    TwoLevelScene scene(config);
+    scene.set_static(test::random_soup(rng, 50, 0.5f));
+    std::vector<Triangle> flat;  // the objects with finite transforms
+    const MeshHandle mesh = scene.add_rigid_mesh(object);
+    for (int i = 0; i < 80; ++i) {
+      glm::mat4 m = glm::translate(glm::mat4(1.0f), test::random_point(rng, 0.0f, 10.0f));
+      m = glm::scale(m, glm::vec3(0.3f + 0.02f * static_cast<float>(i % 20)));
+      if (i % 27 == 5) m[3][1] = nan;  // three objects with a NaN translation
+      scene.add_instance(mesh, m);
+      if (i % 27 == 5) continue;
+      const auto t = transformed(object, m);
+      flat.insert(flat.end(), t.begin(), t.end());
+    }
+    scene.commit();
+    const auto rays = test::random_rays(rng, 2000);
+    size_t disagree = 0, hits = 0;
+    for (const Ray& r : rays) {
+      const Hit got = scene.intersect(r);
+      if (got.valid() && got.inst == kStaticObject) continue;  // the soup is not in `flat`
+      const Hit ref = intersect_brute_force(r, flat);
+      hits += ref.valid();
+      if (ref.valid() != got.valid() || (ref.valid() && std::fabs(ref.t - got.t) > 1e-4f * std::max(1.0f, ref.t))) {
+        ++disagree;
+      }
+    }
+    EXPECT_LE(disagree, 4u) << (config == Config::kBvh ? "bvh" : "kdtree+bvh");
+    EXPECT_GT(hits, rays.size() / 20);
   }
 }
 

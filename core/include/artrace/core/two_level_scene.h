@@ -1,7 +1,7 @@
 // Two-level scene after I. Wald, "Realtime Ray Tracing and Interactive Global Illumination" (PhD
 // thesis, 2004, chapter 9), with BVHs instead of BSPs for the objects: a top level over the objects'
-// world bounds, rebuilt every frame (it holds tens to hundreds of objects, so this costs
-// microseconds), above
+// world bounds (SAH splits, one object a leaf), rebuilt at every commit (it holds tens to hundreds
+// of objects, so this costs well under a millisecond), above
 //   - the static geometry: a kd-tree (`kKdTreeBvh`) or one more BVH instance (`kBvh`);
 //   - rigid meshes: a BVH built once in object space, shared by any number of instances, each with
 //     its own transform (rays are taken to object space; mirroring and non-uniform scale are fine);
@@ -175,7 +175,6 @@ class TwoLevelScene {
   Instance& checked(InstanceHandle h);
   template <class Fn>
   void for_each_bvh(const Fn& fn) const;
-  void build_top(uint32_t node, uint32_t begin, uint32_t end, int depth);
 
   Config config_;
   KdTree kd_;
