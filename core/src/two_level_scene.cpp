@@ -17,8 +17,9 @@ void set_rows(float out[12], const glm::mat4& m) {
 
 /// The top level: a binary tree over the objects' world boxes, one object a leaf, each split the
 /// SAH's best over every cut of the objects sorted by their centres on each axis (ties by index:
-/// the same tree every time). An object costs a transform and a BVH traversal, far more than a
-/// box test, so no leaf holds two. Tens to hundreds of objects: O(n log^2 n) is microseconds.
+/// the same tree every time), median splits below depth 32. An object costs a transform and a
+/// BVH traversal, far more than a box test, so no leaf holds two. O(n log^2 n): robots' 160
+/// objects take about 1M instructions.
 class TopBuilder {
  public:
   TopBuilder(const std::vector<InstanceData>& data, std::vector<uint32_t>& order, std::vector<TopNode>& top)
@@ -37,28 +38,39 @@ class TopBuilder {
       top_[node].count = static_cast<uint16_t>(n);
       return;
     }
-    float best_cost = kInfinity;
     int axis = 0;
     uint32_t split = n / 2;
-    for (int a = 0; a < 3; ++a) {
-      sort(begin, end, a);
-      Aabb right;
-      for (uint32_t k = n - 1; k > 0; --k) {
-        right.extend(data_[order_[begin + k]].world_bounds);
-        right_area_[k] = right.surface_area();
-      }
-      Aabb left;
-      for (uint32_t k = 1; k < n; ++k) {
-        left.extend(data_[order_[begin + k - 1]].world_bounds);
-        const float cost = left.surface_area() * static_cast<float>(k) + right_area_[k] * static_cast<float>(n - k);
-        if (cost < best_cost) {
-          best_cost = cost;
-          axis = a;
-          split = k;
+    if (depth < kSahDepth) {
+      // equal costs (objects in one place) go to the more even split
+      auto uneven = [n](uint32_t k) { return k > n - k ? 2 * k - n : n - 2 * k; };
+      float best_cost = kInfinity;
+      for (int a = 0; a < 3; ++a) {
+        sort(begin, end, a);
+        Aabb right;
+        for (uint32_t k = n - 1; k > 0; --k) {
+          right.extend(data_[order_[begin + k]].world_bounds);
+          right_area_[k] = right.surface_area();
+        }
+        Aabb left;
+        for (uint32_t k = 1; k < n; ++k) {
+          left.extend(data_[order_[begin + k - 1]].world_bounds);
+          const float cost = left.surface_area() * static_cast<float>(k) + right_area_[k] * static_cast<float>(n - k);
+          if (cost < best_cost || (cost == best_cost && uneven(k) < uneven(split))) {
+            best_cost = cost;
+            axis = a;
+            split = k;
+          }
         }
       }
+      if (axis != 2) sort(begin, end, axis);
+    } else {
+      // a chain of splits the SAH made lopsided: medians from here, so depth stays bounded
+      Aabb centres;
+      for (uint32_t i = begin; i < end; ++i) centres.extend(centres_[order_[i]]);
+      const glm::vec3 e = centres.extent();
+      axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+      sort(begin, end, axis);
     }
-    if (axis != 2) sort(begin, end, axis);
     const uint32_t child = static_cast<uint32_t>(top_.size());
     top_.resize(child + 2);
     top_[node].first = child;
@@ -79,6 +91,7 @@ class TopBuilder {
   const std::vector<InstanceData>& data_;
   std::vector<uint32_t>& order_;
   std::vector<TopNode>& top_;
+  static constexpr int kSahDepth = 32;  ///< below this depth, median splits
   std::vector<glm::vec3> centres_;  ///< per object: twice the centre of its world box
   std::vector<float> right_area_;   ///< scratch: the area of the objects from k on
 };
@@ -309,6 +322,22 @@ void TwoLevelScene::commit() {
     TopBuilder(data_, order_, top_).build(0, 0, static_cast<uint32_t>(data_.size()), 0);
   }
   dirty_ = false;
+}
+
+uint32_t TwoLevelScene::top_depth() const {
+  uint32_t deepest = 0;
+  std::vector<std::pair<uint32_t, uint32_t>> todo;  // node, its level
+  if (!top_.empty()) todo.emplace_back(0, 1);
+  while (!todo.empty()) {
+    const auto [node, level] = todo.back();
+    todo.pop_back();
+    deepest = std::max(deepest, level);
+    if (top_[node].count == 0) {
+      todo.emplace_back(top_[node].first, level + 1);
+      todo.emplace_back(top_[node].first + 1, level + 1);
+    }
+  }
+  return deepest;
 }
 
 namespace {

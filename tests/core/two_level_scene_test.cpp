@@ -113,6 +113,31 @@ TEST(TwoLevelScene, ManyObjectsAndNaNTransforms) {
   }
 }
 
+/// Thousands of objects in two places give the SAH nothing to choose between within each place:
+/// the top level stays balanced there (equal costs go to the even split), and rays meet the
+/// nearer copies.
+TEST(TwoLevelScene, ManyObjectsInOnePlace) {
+  TwoLevelScene scene;
+  const MeshHandle mesh = scene.add_rigid_mesh({{{-1, -1, 0}, {1, -1, 0}, {0, 1, 0}}});
+  for (int i = 0; i < 3000; ++i) {
+    scene.add_instance(mesh, glm::translate(glm::mat4(1.0f), glm::vec3(0.0f, 0.0f, i < 2000 ? 0.0f : 1.0f)));
+  }
+  scene.commit();
+  EXPECT_LE(scene.top_depth(), 14u) << "3000 objects: about log2(3000) + 1 levels";
+  for (float x : {-0.5f, 0.0f, 0.3f}) {
+    const Hit h = scene.intersect(Ray{{x, -0.2f, 5.0f}, {0.0f, 0.0f, -1.0f}});
+    ASSERT_TRUE(h.valid());
+    EXPECT_FLOAT_EQ(h.t, 4.0f);
+    EXPECT_GE(h.inst, 2000u) << "the nearer copies are the last thousand";
+    RayPacket p;
+    for (int i = 0; i < kPacketSize; ++i) p.set(i, Ray{{x + 0.01f * static_cast<float>(i % 4), -0.2f, 5.0f}, {0, 0, -1}});
+    HitPacket hp{};
+    for (int i = 0; i < kPacketSize; ++i) hp.prim[i] = hp.inst[i] = kInvalidId, hp.t[i] = kInfinity;
+    scene.intersect(p, kAllLanes, hp);
+    for (int i = 0; i < kPacketSize; ++i) EXPECT_FLOAT_EQ(hp.t[i], 4.0f) << "lane " << i;
+  }
+}
+
 TEST(TwoLevelScene, ConfigurationsGiveIdenticalHitsOnStaticGeometry) {
   std::mt19937 rng(42);
   const auto tris = test::random_soup(rng, 3000, 0.4f);

@@ -107,6 +107,8 @@ class TwoLevelScene {
 
   /// Takes the edits since the last commit: world bounds of every object, a new top level.
   void commit();
+  /// Levels of the committed top level (0 without objects, 1 for a single leaf).
+  uint32_t top_depth() const;
 
   /// Closest hit; `Hit::inst` is the instance index, `kStaticObject`, or for deformable meshes
   /// `deformable_object_id(handle)`.
