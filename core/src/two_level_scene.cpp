@@ -19,22 +19,32 @@ void set_rows(float out[12], const glm::mat4& m) {
 /// The top level: a binary tree over the objects' world boxes, one object a leaf, each split the
 /// SAH's best over every cut of the objects sorted by their centres on each axis (ties by index:
 /// the same tree every time), median splits below depth 32. An object costs a transform and a
-/// BVH traversal, far more than a box test, so no leaf holds two. O(n log^2 n): robots' 160
-/// objects take about 1M instructions.
+/// BVH traversal, far more than a box test, so no leaf holds two. The objects are sorted once on
+/// each axis; a split partitions the three orders stably, so each level costs O(n).
 class TopBuilder {
  public:
   TopBuilder(const std::vector<InstanceData>& data, std::vector<uint32_t>& order, std::vector<TopNode>& top)
-      : data_(data), order_(order), top_(top), right_area_(data.size()) {
-    centres_.reserve(data.size());
-    for (const InstanceData& d : data) centres_.push_back(d.world_bounds.lo + d.world_bounds.hi);
+      : data_(data), order_(order), top_(top), left_(data.size()), scratch_(data.size()), right_area_(data.size()) {
+    const uint32_t n = static_cast<uint32_t>(data.size());
+    std::vector<glm::vec3> centres;  // twice the centre of each world box
+    centres.reserve(n);
+    for (const InstanceData& d : data) centres.push_back(d.world_bounds.lo + d.world_bounds.hi);
+    for (int a = 0; a < 3; ++a) {
+      sorted_[a].resize(n);
+      for (uint32_t i = 0; i < n; ++i) sorted_[a][i] = i;
+      std::sort(sorted_[a].begin(), sorted_[a].end(), [&](uint32_t x, uint32_t y) {
+        return centres[x][a] < centres[y][a] || (centres[x][a] == centres[y][a] && x < y);
+      });
+    }
   }
 
   void build(uint32_t node, uint32_t begin, uint32_t end, int depth) {
     Aabb box;
-    for (uint32_t i = begin; i < end; ++i) box.extend(data_[order_[i]].world_bounds);
+    for (uint32_t i = begin; i < end; ++i) box.extend(data_[sorted_[0][i]].world_bounds);
     top_[node].bounds = box;
     const uint32_t n = end - begin;
     if (n <= 1 || depth >= 48) {
+      std::copy(sorted_[0].begin() + begin, sorted_[0].begin() + end, order_.begin() + begin);
       top_[node].first = begin;
       top_[node].count = static_cast<uint16_t>(n);
       return;
@@ -46,15 +56,15 @@ class TopBuilder {
       auto uneven = [n](uint32_t k) { return k > n - k ? 2 * k - n : n - 2 * k; };
       float best_cost = kInfinity;
       for (int a = 0; a < 3; ++a) {
-        sort(begin, end, a);
+        const uint32_t* objects = sorted_[a].data() + begin;
         Aabb right;
         for (uint32_t k = n - 1; k > 0; --k) {
-          right.extend(data_[order_[begin + k]].world_bounds);
+          right.extend(data_[objects[k]].world_bounds);
           right_area_[k] = right.surface_area();
         }
         Aabb left;
         for (uint32_t k = 1; k < n; ++k) {
-          left.extend(data_[order_[begin + k - 1]].world_bounds);
+          left.extend(data_[objects[k - 1]].world_bounds);
           const float cost = left.surface_area() * static_cast<float>(k) + right_area_[k] * static_cast<float>(n - k);
           if (cost < best_cost || (cost == best_cost && uneven(k) < uneven(split))) {
             best_cost = cost;
@@ -63,14 +73,29 @@ class TopBuilder {
           }
         }
       }
-      if (axis != 2) sort(begin, end, axis);
     } else {
-      // a chain of splits the SAH made lopsided: medians from here, so depth stays bounded
-      Aabb centres;
-      for (uint32_t i = begin; i < end; ++i) centres.extend(centres_[order_[i]]);
-      const glm::vec3 e = centres.extent();
-      axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
-      sort(begin, end, axis);
+      // a chain of lopsided SAH splits: medians of the widest axis from here, so that the depth
+      // (and a leaf at the depth cap) stays bounded whatever the boxes. Defensive: with float
+      // areas a chain this deep needs boxes growing ~30x per object, past float's range, and ties
+      // go to the even cut; no test reaches it.
+      float widest = -1.0f;
+      for (int a = 0; a < 3; ++a) {
+        auto c = [&](uint32_t i) { return data_[i].world_bounds.lo[a] + data_[i].world_bounds.hi[a]; };
+        const float extent = c(sorted_[a][end - 1]) - c(sorted_[a][begin]);
+        if (extent > widest) widest = extent, axis = a;
+      }
+    }
+    // the first `split` objects of the chosen order go left; the other orders follow, stably
+    for (uint32_t i = begin; i < end; ++i) left_[sorted_[axis][i]] = i < begin + split;
+    for (int a = 0; a < 3; ++a) {
+      if (a == axis) continue;
+      uint32_t* objects = sorted_[a].data();
+      uint32_t l = begin, r = 0;
+      for (uint32_t i = begin; i < end; ++i) {
+        if (left_[objects[i]]) objects[l++] = objects[i];
+        else scratch_[r++] = objects[i];
+      }
+      std::copy(scratch_.begin(), scratch_.begin() + r, objects + l);
     }
     const uint32_t child = static_cast<uint32_t>(top_.size());
     top_.resize(child + 2);
@@ -82,19 +107,15 @@ class TopBuilder {
   }
 
  private:
-  void sort(uint32_t begin, uint32_t end, int axis) {
-    std::sort(order_.begin() + begin, order_.begin() + end, [&](uint32_t a, uint32_t b) {
-      const float ca = centres_[a][axis], cb = centres_[b][axis];
-      return ca < cb || (ca == cb && a < b);
-    });
-  }
+  static constexpr int kSahDepth = 32;  ///< below this depth, median splits
 
   const std::vector<InstanceData>& data_;
   std::vector<uint32_t>& order_;
   std::vector<TopNode>& top_;
-  static constexpr int kSahDepth = 32;  ///< below this depth, median splits
-  std::vector<glm::vec3> centres_;  ///< per object: twice the centre of its world box
-  std::vector<float> right_area_;   ///< scratch: the area of the objects from k on
+  std::vector<uint32_t> sorted_[3];  ///< the objects by centre on each axis, a node's as a range
+  std::vector<uint8_t> left_;        ///< per object: goes to the left child of the node being split
+  std::vector<uint32_t> scratch_;    ///< the right side of a partition
+  std::vector<float> right_area_;    ///< the area of a node's objects from k on
 };
 
 }  // namespace
