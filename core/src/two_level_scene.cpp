@@ -23,8 +23,8 @@ void set_rows(float out[12], const glm::mat4& m) {
 /// each axis; a split partitions the three orders stably, so each level costs O(n).
 class TopBuilder {
  public:
-  TopBuilder(const std::vector<InstanceData>& data, std::vector<uint32_t>& order, std::vector<TopNode>& top)
-      : data_(data), order_(order), top_(top), left_(data.size()), scratch_(data.size()), right_area_(data.size()) {
+  TopBuilder(const std::vector<InstanceData>& data, std::vector<TopNode>& top)
+      : data_(data), top_(top), left_(data.size()), scratch_(data.size()), right_area_(data.size()) {
     const uint32_t n = static_cast<uint32_t>(data.size());
     std::vector<glm::vec3> centres;  // twice the centre of each world box
     centres.reserve(n);
@@ -38,13 +38,21 @@ class TopBuilder {
     }
   }
 
+  /// Builds the tree into `top` (cleared); returns the objects in leaf order (a leaf's `first`
+  /// indexes it).
+  std::vector<uint32_t> run() {
+    top_.assign(1, TopNode{});
+    build(0, 0, static_cast<uint32_t>(data_.size()), 0);
+    return std::move(sorted_[0]);  // every order now holds each leaf's objects in its range
+  }
+
+ private:
   void build(uint32_t node, uint32_t begin, uint32_t end, int depth) {
     Aabb box;
     for (uint32_t i = begin; i < end; ++i) box.extend(data_[sorted_[0][i]].world_bounds);
     top_[node].bounds = box;
     const uint32_t n = end - begin;
     if (n <= 1 || depth >= 48) {
-      std::copy(sorted_[0].begin() + begin, sorted_[0].begin() + end, order_.begin() + begin);
       top_[node].first = begin;
       top_[node].count = static_cast<uint16_t>(n);
       return;
@@ -106,11 +114,9 @@ class TopBuilder {
     build(child + 1, begin + split, end, depth + 1);
   }
 
- private:
   static constexpr int kSahDepth = 32;  ///< below this depth, median splits
 
   const std::vector<InstanceData>& data_;
-  std::vector<uint32_t>& order_;
   std::vector<TopNode>& top_;
   std::vector<uint32_t> sorted_[3];  ///< the objects by centre on each axis, a node's as a range
   std::vector<uint8_t> left_;        ///< per object: goes to the left child of the node being split
@@ -314,7 +320,8 @@ void TwoLevelScene::commit() {
     set_rows(d.object_from_world, glm::inverse(world_from_object));
     d.world_bounds = transform_box(bvh.bounds(), world_from_object);
     // An object whose world box is not finite (a NaN or infinite transform, or infinite
-    // vertices) is left out: a ray could not hit it anyway, and a NaN box lets every ray in.
+    // vertices) is left out: a ray could not hit it anyway, and a NaN box would pass every
+    // slab test (vmin and vmax return the operand that is not NaN), sending every ray into it.
     for (int a = 0; a < 3; ++a) {
       if (!std::isfinite(d.world_bounds.lo[a]) || !std::isfinite(d.world_bounds.hi[a])) return;
     }
@@ -336,13 +343,9 @@ void TwoLevelScene::commit() {
     }
     add(d.mesh->bvh(), identity, deformable_object_id({i, 0}), d.pass);
   }
-  order_.resize(data_.size());
-  for (uint32_t i = 0; i < order_.size(); ++i) order_[i] = i;
   top_.clear();
-  if (!data_.empty()) {
-    top_.emplace_back();
-    TopBuilder(data_, order_, top_).build(0, 0, static_cast<uint32_t>(data_.size()), 0);
-  }
+  order_.clear();
+  if (!data_.empty()) order_ = TopBuilder(data_, top_).run();
   dirty_ = false;
 }
 
