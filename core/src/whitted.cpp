@@ -59,16 +59,6 @@ glm::vec3 Texture::sample_level(glm::vec2 uv, int level) const {
   return level == 0 ? bilinear(uv) : mips[static_cast<size_t>(level - 1)].bilinear(uv);
 }
 
-int nearest_mip_level(float texels) {
-  if (!(texels > 1.0f)) return 0;  // also NaN
-  uint32_t bits;
-  std::memcpy(&bits, &texels, sizeof bits);
-  // texels = m 2^e with m in [1, 2): log2 rounds up where m > sqrt(2) (0x3504f3 is the mantissa
-  // of the float just below it; no float equals it)
-  const int e = static_cast<int>(bits >> 23) - 127;
-  return e + ((bits & 0x7fffffu) > 0x3504f3u ? 1 : 0);
-}
-
 void Texture::build_mipmaps() {
   mips.clear();
   const Texture* from = this;
@@ -175,6 +165,7 @@ struct Pending {
   glm::vec3 weight;
   uint8_t lane;
   uint8_t depth;
+  uint8_t key = 0;    ///< the kernels' direction key of a secondary ray (by_direction sorts by it)
   float dist = 0.0f;  ///< path length from the eye to the ray's origin (for texture footprints)
 };
 
@@ -373,12 +364,11 @@ class WaveTracer {
   /// (dominant axis and octant; stable: a counting sort), so that a packet's lanes share it: the
   /// packet kernels trace each key's lanes separately. `scratch` is reused.
   static void by_direction(std::vector<Pending>& gen, std::vector<Pending>& scratch) {
-    auto key = [](const glm::vec3& d) { return direction_key(d.x, d.y, d.z); };
     int start[kDirectionKeys + 1] = {};
-    for (const Pending& r : gen) ++start[key(r.ray.dir) + 1];
+    for (const Pending& r : gen) ++start[r.key + 1];
     for (int k = 0; k < kDirectionKeys; ++k) start[k + 1] += start[k];
     scratch.resize(gen.size());
-    for (const Pending& r : gen) scratch[static_cast<size_t>(start[key(r.ray.dir)]++)] = r;
+    for (const Pending& r : gen) scratch[static_cast<size_t>(start[r.key]++)] = r;
     gen.swap(scratch);
   }
 
@@ -611,6 +601,7 @@ class WaveTracer {
     Pending& s = next.emplace_back();
     s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
     s.ray.dir = dir;
+    s.key = static_cast<uint8_t>(direction_key(dir.x, dir.y, dir.z));
     s.ray.tmin = 0.0f;
     s.ray.tmax = kInfinity;
     s.weight = weight;

@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 namespace artrace::core {
@@ -46,7 +47,16 @@ struct Texture {
 };
 
 /// The mip level nearest to log2(texels) for a footprint of `texels` texels (0 for at most one).
-int nearest_mip_level(float texels);
+/// Inline: the shader asks once per textured hit.
+inline int nearest_mip_level(float texels) {
+  if (!(texels > 1.0f)) return 0;  // also NaN
+  uint32_t bits;
+  std::memcpy(&bits, &texels, sizeof bits);
+  // texels = m 2^e with m in [1, 2): log2 rounds up where m > sqrt(2) (0x3504f3 is the mantissa
+  // of the float just below it; no float equals it)
+  const int e = static_cast<int>(bits >> 23) - 127;
+  return e + ((bits & 0x7fffffu) > 0x3504f3u ? 1 : 0);
+}
 
 struct Material {
   glm::vec3 ambient{0.0f};   ///< times the scene's ambient light
