@@ -192,8 +192,9 @@ struct WaveLanes {
       specular[kQuarters][3], org[kQuarters][3];
   F4 magnitude[kQuarters];                  ///< largest coordinate of the hit triangle
   F4 dist[kQuarters];                       ///< path length from the eye
-  F4 min_cos[kQuarters];                    ///< highlight cut-off cosine (2: none)
-  M4 hit[kQuarters], highlight[kQuarters];  ///< lanes with a hit; lanes whose material has a highlight
+  /// Highlight cut-off cosine; 2 where there is no highlight (no cosine exceeds it).
+  F4 min_cos[kQuarters];
+  M4 hit[kQuarters];  ///< lanes with a hit
   M4 inside[kQuarters];                     ///< the ray met the back side (it leaves a solid)
   float shine[kPacketSize];
   const Material* m[kPacketSize];
@@ -321,7 +322,9 @@ struct LightLanes {
 
 /// What every tile needs, worked out once per image.
 struct Prepared {
-  std::vector<float> highlight_cos;  ///< per material: below this cosine the highlight is under 1e-4
+  /// Per material: below this cosine the highlight is under 1e-4; 2 for materials without one
+  /// (no exponent, a black highlight colour, or an exponent so large that the cut-off rounds to 1).
+  std::vector<float> highlight_cos;
   bool transmissive = false;
   /// Shadow rays see through transmissive triangles in one traversal (the geometry knows their
   /// transmittance); otherwise blocked ones are walked, and the boxes tell which need it.
@@ -332,7 +335,8 @@ struct Prepared {
   explicit Prepared(const ShadingScene& s) {
     for (const Material& m : s.materials) {
       transmissive |= m.transmittance > 0.0f;
-      highlight_cos.push_back(m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f);
+      const float c = m.shine > 0.0f ? std::pow(1e-4f, 1.0f / m.shine) : 2.0f;
+      highlight_cos.push_back(c < 1.0f && max3(m.specular) > 0.0f ? c : 2.0f);
     }
     one_traversal = transmissive && s.geometry->has_transmittance();
     if (transmissive && !one_traversal) have_boxes = s.surfaces->transmissive_bounds(boxes);
@@ -420,7 +424,6 @@ class WaveTracer {
         for (int a = 0; a < 3; ++a) w.diffuse[h][a][k] = w.specular[h][a][k] = 0.0f;
         w.min_cos[h][k] = 2.0f;
         w.shine[i] = 0.0f;
-        w.highlight[h][k] = 0;
         w.m[i] = nullptr;
         continue;
       }
@@ -437,7 +440,6 @@ class WaveTracer {
       const float mc = pre_.highlight_cos[static_cast<size_t>(material_ids[i])];
       w.min_cos[h][k] = mc;
       w.shine[i] = m->shine;
-      w.highlight[h][k] = (mc < 1.0f && max3(m->specular) > 0.0f) ? -1 : 0;
       w.m[i] = m;
     }
 
@@ -526,7 +528,8 @@ class WaveTracer {
       F4 r[3];
       for (int a = 0; a < 3; ++a) r[a] = two_ndl * w.ns[h][a] - l[a];
       const F4 rv = (r[0] * w.view[h][0] + r[1] * w.view[h][1]) + r[2] * w.view[h][2];
-      uint32_t shiny = bits4(ok & w.highlight[h] & (rv > w.min_cos[h]));
+      // rv is at most 1 (and rounding): never above the 2 of a lane without a highlight
+      uint32_t shiny = bits4(ok & (rv > w.min_cos[h]));
       while (shiny) {
         const int k = __builtin_ctz(shiny);
         shiny &= shiny - 1;
