@@ -166,8 +166,10 @@ void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask
   for (int i = 0; i < core::kPacketSize; ++i) {
     if (!((mask >> i) & 1u)) continue;
     const core::Hit h = hits.get(i);
-    materials[i] = anim_.material(h);
-    shade_hit(anim_, anim_.batch(h), h, world_tris[i], infos[i]);
+    // the batch once: its material is what anim_.material() looks up again
+    const TriangleBatch* b = anim_.batch(h);
+    materials[i] = b ? b->material.at(h.prim) : anim_.material(h);
+    shade_hit(anim_, b, h, world_tris[i], infos[i]);
   }
 }
 
