@@ -191,6 +191,7 @@ struct WaveLanes {
   F4 p[kQuarters][3], ng[kQuarters][3], ns[kQuarters][3], view[kQuarters][3], diffuse[kQuarters][3],
       specular[kQuarters][3], org[kQuarters][3];
   F4 magnitude[kQuarters];                  ///< largest coordinate of the hit triangle
+  F4 step[kQuarters];                       ///< offset_ray_origin's step at the hit (origins())
   F4 dist[kQuarters];                       ///< path length from the eye
   /// Highlight cut-off cosine; 2 where there is no highlight (no cosine exceeds it).
   F4 min_cos[kQuarters];
@@ -306,8 +307,8 @@ struct WaveLanes {
   void origins() {
     for (int h = 0; h < kQuarters; ++h) {
       const F4 m = max4(max4(abs4(p[h][0]), abs4(p[h][1])), max4(abs4(p[h][2]), magnitude[h]));
-      const F4 step = max4(m * kOffsetScale, F4{} + kOffsetFloor);
-      for (int a = 0; a < 3; ++a) org[h][a] = p[h][a] + step * ng[h][a];
+      step[h] = max4(m * kOffsetScale, F4{} + kOffsetFloor);
+      for (int a = 0; a < 3; ++a) org[h][a] = p[h][a] + step[h] * ng[h][a];
     }
   }
 };
@@ -445,7 +446,7 @@ class WaveTracer {
 
     // Direct light. First every light's lanes, contributions and shadow rays, the lanes side by
     // side (one origin per hit), then all the shadow packets in one go, then the sums.
-    if (has_shadows(o_.mode)) w.origins();
+    if (has_shadows(o_.mode) || has_secondary(o_.mode)) w.origins();
     const size_t light_count = s_.lights.size();
     for (size_t li = 0; li < light_count; ++li) light_lanes(w, s_.lights[li], light_lanes_[li]);
     if (has_shadows(o_.mode)) {
@@ -481,7 +482,7 @@ class WaveTracer {
       const Pending& r = rays[i];
       const glm::vec3 view = lane3(w.view, i), ns = lane3(w.ns, i), ng = lane3(w.ng, i);
       const bool inside = w.inside[i >> 2][i & 3] != 0;
-      const Origin at{lane3(w.p, i), w.magnitude[i >> 2][i & 3], w.dist[i >> 2][i & 3]};
+      const Origin at{lane3(w.p, i), w.step[i >> 2][i & 3], w.dist[i >> 2][i & 3]};
       glm::vec3 kr = m.specular;
       const float kt = m.transmittance;
       if (kt > 0.0f) {
@@ -593,16 +594,16 @@ class WaveTracer {
     return nearest_mip_level(footprint * info.uv_per_world * static_cast<float>(std::max(tex.width, tex.height)));
   }
 
-  /// Where a secondary ray starts: the hit point, its triangle's largest coordinate, the path length.
+  /// Where a secondary ray starts: the hit point, the step off its surface, the path length.
   struct Origin {
     glm::vec3 p;
-    float magnitude, dist;
+    float step, dist;  ///< offset_ray_origin's step at p (WaveLanes::origins), the path length
   };
 
   static void push(std::vector<Pending>& next, const Origin& q, const glm::vec3& side, const glm::vec3& dir,
                    const glm::vec3& weight, const Pending& from) {
     Pending& s = next.emplace_back();
-    s.ray.org = offset_ray_origin(q.p, side, q.magnitude);
+    s.ray.org = q.p + q.step * side;  // offset_ray_origin(p, side, magnitude), the step worked out once
     s.ray.dir = dir;
     s.key = static_cast<uint8_t>(direction_key(dir.x, dir.y, dir.z));
     s.ray.tmin = 0.0f;
