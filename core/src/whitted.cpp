@@ -44,9 +44,9 @@ glm::vec3 Texture::bilinear(glm::vec2 uv) const {
   auto wrap = [](int i, int n) { return i < 0 ? i + n : (i >= n ? i - n : i); };
   const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
   const int x0 = wrap(ix, width), x1 = wrap(ix + 1, width);
-  const int y0 = wrap(iy, height), y1 = wrap(iy + 1, height);
-  auto at = [&](int xx, int yy) { return texels[static_cast<size_t>(yy) * width + xx]; };
-  return (at(x0, y0) * (1.0f - ax) + at(x1, y0) * ax) * (1.0f - ay) + (at(x0, y1) * (1.0f - ax) + at(x1, y1) * ax) * ay;
+  const glm::vec3* const row0 = texels.data() + static_cast<size_t>(wrap(iy, height)) * static_cast<size_t>(width);
+  const glm::vec3* const row1 = texels.data() + static_cast<size_t>(wrap(iy + 1, height)) * static_cast<size_t>(width);
+  return (row0[x0] * (1.0f - ax) + row0[x1] * ax) * (1.0f - ay) + (row1[x0] * (1.0f - ax) + row1[x1] * ax) * ay;
 }
 
 glm::vec3 Texture::sample(glm::vec2 uv, float lod) const {
