@@ -81,6 +81,15 @@ core::Texture load_ppm(const std::filesystem::path& path) {
 
 namespace {
 
+/// Texture coordinates per unit of world length on a triangle: sqrt(uv area / world area), 0 for
+/// one without a world area.
+inline float uv_per_world(const std::array<glm::vec2, 3>& uv, const core::Triangle& world) {
+  const glm::vec2 e1 = uv[1] - uv[0], e2 = uv[2] - uv[0];
+  const float uv_area = std::fabs(e1.x * e2.y - e1.y * e2.x);
+  const float world_area = glm::length(world.geometric_normal());
+  return world_area > 0.0f ? std::sqrt(uv_area / world_area) : 0.0f;
+}
+
 /// Boxes around runs of consecutive transmissive triangles, merged pairwise down to `cap` boxes.
 std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const AffScene& scene, size_t cap) {
   std::vector<core::Aabb> boxes;
@@ -110,7 +119,19 @@ std::vector<core::Aabb> transmissive_runs(const TriangleBatch& b, const AffScene
 
 BartSurfaces::BartSurfaces(const BartAnimation& animation) : anim_(animation) {
   const AffScene& aff = animation.aff();
-  if (!aff.nodes.empty()) static_boxes_ = transmissive_runs(aff.nodes[0].geometry, aff, 64);
+  if (!aff.nodes.empty()) {
+    const TriangleBatch& b = aff.nodes[0].geometry;
+    static_boxes_ = transmissive_runs(b, aff, 64);
+    // the static triangles as the scene holds them (the hits' world triangles)
+    const core::KdTree* kd = animation.scene().static_kd_tree();
+    const std::vector<core::Triangle>& world = kd ? kd->triangles() : b.tris;
+    if (world.size() == b.size()) {
+      static_uv_per_world_.resize(b.size(), 0.0f);
+      for (size_t i = 0; i < b.size(); ++i) {
+        if (b.texture[i] >= 0) static_uv_per_world_[i] = uv_per_world(b.uvs[i], world[i]);
+      }
+    }
+  }
   const auto& nodes = animation.instance_nodes();
   for (uint32_t inst = 0; inst < nodes.size(); ++inst) {
     if (nodes[inst] == 0) continue;
@@ -134,9 +155,10 @@ bool BartSurfaces::transmissive_bounds(std::vector<core::Aabb>& boxes) const {
 
 namespace {
 
-/// Shading normal, texture coordinates and texture of `hit` on its object's batch `b`.
+/// Shading normal, texture coordinates and texture of `hit` on its object's batch `b`;
+/// `static_uv_per_world` (optional): uv_per_world() of every static triangle, worked out once.
 inline void shade_hit(const BartAnimation& anim, const TriangleBatch* b, const core::Hit& hit,
-                      const core::Triangle& world, core::SurfaceInfo& info) {
+                      const core::Triangle& world, core::SurfaceInfo& info, const float* static_uv_per_world) {
   if (!b || hit.prim >= b->size()) return;
   const float w = 1.0f - hit.u - hit.v;
   const auto& n = b->normals[hit.prim];
@@ -146,30 +168,30 @@ inline void shade_hit(const BartAnimation& anim, const TriangleBatch* b, const c
   info.uv = w * uv[0] + hit.u * uv[1] + hit.v * uv[2];
   info.texture = b->texture[hit.prim];
   if (info.texture >= 0) {
-    const glm::vec2 e1 = uv[1] - uv[0], e2 = uv[2] - uv[0];
-    const float uv_area = std::fabs(e1.x * e2.y - e1.y * e2.x);
-    const float world_area = glm::length(world.geometric_normal());
-    info.uv_per_world = world_area > 0.0f ? std::sqrt(uv_area / world_area) : 0.0f;
+    // the static geometry is its own world space: its triangles are the ones the hits name
+    info.uv_per_world = hit.inst == core::kStaticObject && static_uv_per_world ? static_uv_per_world[hit.prim]
+                                                                                : uv_per_world(uv, world);
   }
 }
 
 }  // namespace
 
 void BartSurfaces::shading(const core::Hit& hit, const core::Triangle& world, core::SurfaceInfo& info) const {
-  shade_hit(anim_, anim_.batch(hit), hit, world, info);
+  shade_hit(anim_, anim_.batch(hit), hit, world, info, static_uv_per_world_.empty() ? nullptr : static_uv_per_world_.data());
 }
 
 void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask, const core::Triangle* world_tris,
                                 uint32_t* materials, core::SurfaceInfo* infos) const {
   // the default's loop, with direct calls: shade_hit inline (one shared loop calling shading() by
   // name was measured at 0.6% more instructions a robots frame: GCC kept shading() out of line)
+  const float* const static_uv = static_uv_per_world_.empty() ? nullptr : static_uv_per_world_.data();
   for (int i = 0; i < core::kPacketSize; ++i) {
     if (!((mask >> i) & 1u)) continue;
     const core::Hit h = hits.get(i);
     // the batch once: its material is what anim_.material() looks up again
     const TriangleBatch* b = anim_.batch(h);
     materials[i] = b ? b->material.at(h.prim) : anim_.material(h);
-    shade_hit(anim_, b, h, world_tris[i], infos[i]);
+    shade_hit(anim_, b, h, world_tris[i], infos[i], static_uv);
   }
 }
 

@@ -92,7 +92,7 @@ TEST(BartShading, PacketShadingEqualsHitByHit) {
   BartSurfaces surfaces(anim);
   anim.set_time(7.5);  // robots mid-walk: hits on moved instances, textured and not
   const core::Camera cam = aff.camera_at(7.5, 64, 48);
-  int hits = 0, moved = 0, textured = 0;
+  int hits = 0, moved = 0, textured = 0, static_textured = 0;
   for (int y = 0; y < 48; ++y) {
     for (int x0 = 0; x0 < 64; x0 += core::kPacketSize) {
       core::RayPacket rays;
@@ -128,6 +128,15 @@ TEST(BartShading, PacketShadingEqualsHitByHit) {
         EXPECT_EQ(infos[i].uv, one.uv);
         EXPECT_EQ(infos[i].texture, one.texture);
         EXPECT_EQ(infos[i].uv_per_world, one.uv_per_world);
+        if (h.inst == core::kStaticObject && one.texture >= 0) {
+          // the static triangles' table against the scale worked out from the hit's triangle
+          const auto& uv = aff.nodes[0].geometry.uvs[h.prim];
+          const glm::vec2 e1 = uv[1] - uv[0], e2 = uv[2] - uv[0];
+          const float area = glm::length(tris[i].geometric_normal());
+          ASSERT_GT(area, 0.0f);
+          EXPECT_EQ(one.uv_per_world, std::sqrt(std::fabs(e1.x * e2.y - e1.y * e2.x) / area)) << "prim " << h.prim;
+          ++static_textured;
+        }
         ++hits;
         moved += h.inst != core::kStaticObject;
         textured += one.texture >= 0;
@@ -137,6 +146,7 @@ TEST(BartShading, PacketShadingEqualsHitByHit) {
   EXPECT_GT(hits, 64 * 48 / 2);
   EXPECT_GT(moved, 50) << "some hits on the robots themselves";
   EXPECT_GT(textured, 50);
+  EXPECT_GT(static_textured, 50);
 }
 
 }  // namespace

@@ -30,6 +30,7 @@ class BartSurfaces : public core::SurfaceAttributes {
   std::vector<core::Aabb> static_boxes_;
   std::vector<std::pair<uint32_t, core::Aabb>> object_boxes_;  ///< (instance, object-space box)
   bool unknown_ = false;  ///< transmissive animated triangles: no boxes
+  std::vector<float> static_uv_per_world_;  ///< texture scale of each textured static triangle (mip levels)
 };
 
 /// Materials, lights and textures of the scene; geometry and surfaces point at the arguments.
