@@ -22,7 +22,22 @@ struct TestScene : SurfaceAttributes {
   TwoLevelScene geometry{TwoLevelScene::Config::kKdTreeBvh};
   ShadingScene shading;
 
+  /// When set, every hit is textured with shading.textures[0], at texture coordinates taken from
+  /// its barycentrics and far outside [0, 1] (repeats), at the mip level its footprint picks.
+  bool textured = false;
+
   uint32_t material(const Hit& h) const override { return mat.at(h.prim); }
+  void shade_packet(const HitPacket& hits, LaneMask mask, const Triangle* world_tris, uint32_t* materials,
+                    SurfaceInfo* infos) const override {
+    SurfaceAttributes::shade_packet(hits, mask, world_tris, materials, infos);
+    if (!textured) return;
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (!((mask >> i) & 1u)) continue;
+      infos[i].texture = 0;
+      infos[i].uv = glm::vec2(7.0f * hits.u[i] - 3.0f, 5.0f * hits.v[i] + 0.25f * static_cast<float>(hits.prim[i]));
+      infos[i].uv_per_world = 4.0f;
+    }
+  }
 
   uint32_t add_material(const Material& m) {
     shading.materials.push_back(m);
@@ -401,7 +416,7 @@ TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
   EXPECT_EQ(a.pixels, c.pixels);
 }
 
-TEST(Whitted, SameImageWithEveryPacketKernel) {
+TEST(Whitted, SameImageWithEveryPacketKernelAndShadingCopy) {
   // the kernels trace a packet 16, 8 or 4 lanes at a time, or lane by lane, with the same float
   // operations: the frame (glass shadows and secondary rays included) must not change
   const TestScene s = room();
@@ -409,8 +424,22 @@ TEST(Whitted, SameImageWithEveryPacketKernel) {
   WhittedOptions o;
   o.mode = ShadingMode::kAll;
   const SimdLevel saved = simd_level();
+  // The shading follows the same choice (an AVX2 copy for AVX2 and AVX-512, else the baseline
+  // one), so the room is also rendered textured: filtering, mip levels and repeats in both copies.
+  TestScene t = room();
+  t.textured = true;
+  t.shading.surfaces = &t;
+  Texture& tex = t.shading.textures.emplace_back();
+  tex.width = 16;
+  tex.height = 8;
+  for (int i = 0; i < tex.width * tex.height; ++i) {
+    tex.texels.push_back(glm::vec3((i % 7) / 6.0f, (i % 3) / 2.0f, ((i / 16 + i) % 2) ? 0.9f : 0.2f));
+  }
+  tex.build_mipmaps();
   set_simd_level(SimdLevel::kScalar);
   const Image want = render_whitted(s.shading, cam, o);
+  const Image want_textured = render_whitted(t.shading, cam, o);
+  ASSERT_NE(want_textured.pixels, want.pixels);
   for (const SimdLevel level : {SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
     if (!simd_level_supported(level)) {
       std::cout << "[ note ] " << to_string(level) << " not supported by this CPU, not tested\n";
@@ -418,6 +447,7 @@ TEST(Whitted, SameImageWithEveryPacketKernel) {
     }
     set_simd_level(level);
     EXPECT_EQ(render_whitted(s.shading, cam, o).pixels, want.pixels) << to_string(level);
+    EXPECT_EQ(render_whitted(t.shading, cam, o).pixels, want_textured.pixels) << to_string(level) << ", textured";
   }
   set_simd_level(saved);
 }

@@ -6,7 +6,8 @@
 namespace artrace::core {
 
 /// Which packet kernels run. `kAuto` picks AVX-512 (16 wide) when the CPU has it (F, VL, DQ, BW),
-/// else AVX2 (8 wide), else SSE (4 wide).
+/// else AVX2 (8 wide), else SSE (4 wide). The shading follows: at kAvx2 and kAvx512 it runs a copy
+/// compiled for AVX2 (whitted.cpp), else the baseline one; both give the same bits.
 enum class SimdLevel { kAuto, kScalar, kSse, kAvx2, kAvx512 };
 
 /// True when this CPU can run `level` (kScalar, kSse and kAuto always can).
