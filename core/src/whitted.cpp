@@ -91,9 +91,11 @@ namespace shade_base {
 #define ARTRACE_SHADE_AVX2 1
 #pragma GCC push_options
 #pragma GCC target("avx2")
+#define ARTRACE_SHADE_ROUNDSS 1
 namespace shade_avx2 {
 #include "whitted_wave.inc"
 }  // namespace shade_avx2
+#undef ARTRACE_SHADE_ROUNDSS
 #pragma GCC pop_options
 #endif
 
