@@ -409,7 +409,9 @@ TEST(TwoLevelScene, TransmittanceEqualsBruteForceAndCountsEachSurfaceOnceWithOrW
       EXPECT_LE(unsure_lanes, counted / 100) << "unsure answers should be rare";
       EXPECT_GT(partial, counted / 10) << "the test must exercise transmissive crossings";
       if (config == Config::kKdTreeBvh) {
-        EXPECT_GT(hinted, 100u) << "the natural hint must be exercised";
+        // a hint that blocks none of a packet's lanes is dropped (it is tried once), and random
+        // packets rarely share a blocker: 47 of these packets start with one
+        EXPECT_GT(hinted, 25u) << "the natural hint must be exercised";
       }
     }
   }

@@ -103,7 +103,9 @@ struct KdTreeStats {
 };
 
 /// Shadow-ray coherence (a "last occluder" cache): the kd-tree triangle that blocked the previous
-/// packet towards the same light is tested before the traversal, and lanes it blocks skip it.
+/// packet towards the same light is tested before the traversal, and lanes it blocks skip it. A
+/// hint that blocks none of a packet's lanes is replaced by that packet's blocker, or dropped
+/// when it has none (a stale hint is tried once, not on every packet).
 /// Keep one per light and per thread, for one tree; a fresh one is empty. It changes the work,
 /// never the answer (the triangle is tested exactly as the traversal would test it).
 struct ShadowHint {
