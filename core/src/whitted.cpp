@@ -92,9 +92,11 @@ namespace shade_base {
 #pragma GCC push_options
 #pragma GCC target("avx2")
 #define ARTRACE_SHADE_ROUNDSS 1
+#define ARTRACE_SHADE_LANES 8
 namespace shade_avx2 {
 #include "whitted_wave.inc"
 }  // namespace shade_avx2
+#undef ARTRACE_SHADE_LANES
 #undef ARTRACE_SHADE_ROUNDSS
 #pragma GCC pop_options
 #endif
