@@ -79,10 +79,10 @@ void check(const ShadingScene& scene) {
 
 }  // namespace
 
-// The shading, twice: for the baseline, and with AVX2 encodings for CPUs that have it (chosen with
-// the packet kernels: simd_level() AVX2 or AVX-512). The baseline copy comes first, so that every
-// template both use (glm's, the standard library's) is instantiated for the baseline; the AVX2
-// copy's own types and functions live in its namespace.
+// The shading, twice: for the baseline (4 lanes side by side), and for AVX2 (8 lanes) on CPUs
+// that have it, chosen with the packet kernels (simd_level() AVX2 or AVX-512). The baseline copy
+// comes first, so that every template both use (glm's, the standard library's) is instantiated for
+// the baseline; the AVX2 copy's own types and functions live in its namespace.
 namespace shade_base {
 #include "whitted_wave.inc"
 }  // namespace shade_base
@@ -189,7 +189,9 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
   Image img(cam.width, cam.height);
   const Prepared pre(scene);
   tbb::enumerable_thread_specific<Counters> counters;
+#ifdef ARTRACE_SHADE_AVX2
   const bool avx2 = simd_level() == SimdLevel::kAvx2 || simd_level() == SimdLevel::kAvx512;
+#endif
   for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
     const uint64_t t0 = ticks();
     Counters& c = counters.local();

@@ -23,7 +23,8 @@ struct TestScene : SurfaceAttributes {
   ShadingScene shading;
 
   /// When set, every hit is textured with shading.textures[0], at texture coordinates taken from
-  /// its barycentrics and far outside [0, 1] (repeats), at the mip level its footprint picks.
+  /// its barycentrics and far outside [0, 1] (repeats): on odd triangles at the mip level the
+  /// footprint picks, on even ones at full size.
   bool textured = false;
 
   uint32_t material(const Hit& h) const override { return mat.at(h.prim); }
@@ -35,7 +36,7 @@ struct TestScene : SurfaceAttributes {
       if (!((mask >> i) & 1u)) continue;
       infos[i].texture = 0;
       infos[i].uv = glm::vec2(7.0f * hits.u[i] - 3.0f, 5.0f * hits.v[i] + 0.25f * static_cast<float>(hits.prim[i]));
-      infos[i].uv_per_world = 4.0f;
+      infos[i].uv_per_world = hits.prim[i] % 2 ? 4.0f : 0.0f;  // 0: the full-size texture
     }
   }
 
