@@ -2,7 +2,8 @@
 // geometry and light loop, the two-level scene's bookkeeping): GCC vector extensions, one SSE
 // register on the x86-64 baseline, plain scalar code where there is no SSE. A packet of
 // kPacketSize lanes is handled as quarters. Each lane computes with the same operations, in the
-// same order, as scalar code would, so results do not depend on the grouping.
+// same order, as scalar code would, so results do not depend on the grouping. (The shader's AVX2
+// copy takes 8 lanes at a time instead: whitted_wave.inc.)
 #pragma once
 
 #include "artrace/core/ray_packet.h"
