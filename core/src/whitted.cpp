@@ -101,6 +101,25 @@ namespace shade_avx2 {
 #pragma GCC pop_options
 #endif
 
+namespace {
+
+/// The copy of the shading the SIMD level picks (AVX2 and AVX-512: the AVX2 copy).
+struct ShadeCopy {
+  decltype(&shade_base::render_tile) tile;
+  decltype(&shade_base::trace_ray) ray;
+};
+
+ShadeCopy shade_copy() {
+#ifdef ARTRACE_SHADE_AVX2
+  if (simd_level() == SimdLevel::kAvx2 || simd_level() == SimdLevel::kAvx512) {
+    return {&shade_avx2::render_tile, &shade_avx2::trace_ray};
+  }
+#endif
+  return {&shade_base::render_tile, &shade_base::trace_ray};
+}
+
+}  // namespace
+
 glm::vec3 Texture::bilinear(glm::vec2 uv) const { return shade_base::bilinear(*this, uv); }
 
 glm::vec3 Texture::sample(glm::vec2 uv, float lod) const {
@@ -181,7 +200,6 @@ bool refract_direction(const glm::vec3& d, const glm::vec3& n, float eta, glm::v
   return true;
 }
 
-
 Image render_whitted(const ShadingScene& scene, const Camera& cam, const WhittedOptions& opt, WhittedStats* stats) {
   check(scene);
   const auto start = Clock::now();
@@ -189,21 +207,11 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
   Image img(cam.width, cam.height);
   const Prepared pre(scene);
   tbb::enumerable_thread_specific<Counters> counters;
-#ifdef ARTRACE_SHADE_AVX2
-  const bool avx2 = simd_level() == SimdLevel::kAvx2 || simd_level() == SimdLevel::kAvx512;
-#endif
+  const ShadeCopy copy = shade_copy();
   for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
     const uint64_t t0 = ticks();
     Counters& c = counters.local();
-#ifdef ARTRACE_SHADE_AVX2
-    if (avx2) {
-      shade_avx2::render_tile(scene, cam, opt, pre, c, t, img);
-    } else {
-      shade_base::render_tile(scene, cam, opt, pre, c, t, img);
-    }
-#else
-    shade_base::render_tile(scene, cam, opt, pre, c, t, img);
-#endif
+    copy.tile(scene, cam, opt, pre, c, t, img);
     c.total_ticks += ticks_since(t0);
   });
   if (stats) {
@@ -230,12 +238,7 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
 glm::vec3 trace_whitted(const ShadingScene& scene, const Ray& ray, const WhittedOptions& opt) {
   check(scene);
   const Prepared pre(scene);
-#ifdef ARTRACE_SHADE_AVX2
-  if (simd_level() == SimdLevel::kAvx2 || simd_level() == SimdLevel::kAvx512) {
-    return shade_avx2::trace_ray(scene, ray, opt, pre);
-  }
-#endif
-  return shade_base::trace_ray(scene, ray, opt, pre);
+  return shade_copy().ray(scene, ray, opt, pre);
 }
 
 }  // namespace artrace::core
