@@ -95,9 +95,19 @@ OniFileInfo inspect_oni(const std::filesystem::path& path) {
         if (!node_index.count(node)) b.fail(at, "property for node " + std::to_string(node) + " before it was added");
         uint32_t used = 0;
         const std::string name = b.str(f, used);
+        for (const char c : name) {
+          // a byte of 0x80 or more in any property name crashed the player (SIGSEGV in libOniFile)
+          if (c < 0x20 || c > 0x7e) {
+            b.fail(at, "property name holds byte " + std::to_string(static_cast<unsigned char>(c)) +
+                           ", outside printable ASCII (OpenNI2's player crashes on such names)");
+          }
+        }
+        OniNodeInfo& owner = info.nodes[node_index[node]];
+        owner.has_mode |= name == "xnMapOutputMode";
+        owner.has_cropping |= name == "xnCropping";
         if (type == 0x06 && name == "xnMapOutputMode") {
           if (b.get<uint32_t>(f + used) != 12) b.fail(at, "xnMapOutputMode must hold 12 bytes");
-          OniNodeInfo& n = info.nodes[node_index[node]];
+          OniNodeInfo& n = owner;
           n.width = static_cast<int>(b.get<uint32_t>(f + used + 4));
           n.height = static_cast<int>(b.get<uint32_t>(f + used + 8));
           n.fps = static_cast<int>(b.get<uint32_t>(f + used + 12));
@@ -114,6 +124,11 @@ OniFileInfo inspect_oni(const std::filesystem::path& path) {
       case 0x0A: {  // NewData
         if (!node_index.count(node)) b.fail(at, "frame data for an unknown node");
         OniNodeInfo& n = info.nodes[node_index[node]];
+        // without either property the player drops every frame of the stream (oni-format.md)
+        if (!n.has_mode || !n.has_cropping) {
+          b.fail(at, "frame data for node '" + n.name + "' before its " + (n.has_mode ? "xnCropping" : "xnMapOutputMode") +
+                         " property (OpenNI2 plays no frame without it)");
+        }
         const uint32_t number = b.get<uint32_t>(f + 8);
         if (number == 0 || number > n.frames) {
           b.fail(at, "frame number " + std::to_string(number) + " outside 1.." + std::to_string(n.frames));

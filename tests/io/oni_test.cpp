@@ -120,12 +120,20 @@ TEST(Oni, DamagedFilesAreRefusedWithTheFileNamed) {
   // NodeAdded of node 1 starts at 24; its codec sits after header (28), name (4
   // + 6) and type (4)
   std::memset(&codec0[24 + 28 + 10 + 4], 0, 4);
+  // a property name with a byte outside ASCII (OpenNI2's player crashed on it: found by fuzzing
+  // `artrace info`), and a stream without its xnCropping (the player would wait for frames in vain)
+  std::string high_byte = bytes;
+  high_byte[high_byte.find("xnMapOutputMode") + 2] = '\xd6';
+  std::string no_cropping = bytes;
+  no_cropping[no_cropping.find("xnCropping") + 2] = 'Q';
   const Damage cases[] = {
       {"truncated_header.oni", bytes.substr(0, 10), "not an ONI file"},
       {"truncated_middle.oni", bytes.substr(0, bytes.size() / 2), "truncated"},
       {"no_end.oni", bytes.substr(0, bytes.size() - 28), "no End record"},
       {"garbled.oni", bad_magic, "corrupt"},
       {"codec0.oni", codec0, "codec 0"},
+      {"high_byte_name.oni", high_byte, "property name holds byte 214, outside printable ASCII"},
+      {"no_cropping.oni", no_cropping, "before its xnCropping property"},
   };
   for (const Damage &d : cases) {
     const auto path = std::filesystem::temp_directory_path() / d.name;

@@ -1,5 +1,6 @@
 // Structure check of ONI files before OpenNI2 sees them: OpenNI2's player crashes on some corrupt
-// files (a node without StateReady, codec 0), so every record is walked here first.
+// files (a node without StateReady, codec 0, a property name outside ASCII), so every record is
+// walked here first.
 #pragma once
 
 #include <cstdint>
@@ -17,6 +18,7 @@ struct OniNodeInfo {
   uint32_t frames = 0;
   int width = 0, height = 0, fps = 0;
   uint32_t data_records = 0;
+  bool has_mode = false, has_cropping = false;  ///< xnMapOutputMode and xnCropping seen
 };
 
 struct OniFileInfo {
