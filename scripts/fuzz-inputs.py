@@ -3,7 +3,9 @@
 
 Mutates the bundled inputs (the demo AFF scene, the glTF models, the AR scene JSON, an ONI file
 converted from the bundled recording, the TUM folder itself and a PPM texture) and runs `artrace
-info` (or `bench-io` / `bench-bart`, which read every frame or load the textures) on each mutant.
+info` on each mutant, and what uses it further: `render` and `bench-bart` the scene, `export` (three
+frames) the AR scene and each model placed in one, `bench-io` the recording (every frame decoded),
+`bench-bart` a scene textured with the PPM.
 A clean error (exit status 1) or success passes; a signal, an exit status above 2 (give a
 sanitizer build exit codes above 2) or a hang is a failure, and the mutant is kept.
 
@@ -14,6 +16,7 @@ With a sanitizer build (ARTRACE_SANITIZE=ON, tools on):
         python3 scripts/fuzz-inputs.py --artrace build-asan/tools/artrace --cases 100
 """
 import argparse
+import json
 import os
 import random
 import re
@@ -93,7 +96,8 @@ class Runner:
             print('FAIL %s: %s %s (%s)' % (status, ' '.join(args[:1]), kept, message), flush=True)
 
 
-def fuzz_file(runner, rng, source, binary, cases, command):
+def fuzz_file(runner, rng, source, binary, cases, commands):
+    """Each mutant of `source` through each of `commands` ('{}' stands for the mutant's path)."""
     data = open(source, 'rb').read()
     # next to the source, so that relative references (models, recordings) still resolve
     mutant = os.path.join(os.path.dirname(source), 'fuzz-mutant' + os.path.splitext(source)[1])
@@ -101,9 +105,21 @@ def fuzz_file(runner, rng, source, binary, cases, command):
         for _ in range(cases):
             out = mutate_binary(data, rng, 65536) if binary else mutate_text(data.decode('latin1'), rng).encode('latin1')
             open(mutant, 'wb').write(out)
-            runner.run(command + [mutant], mutant, os.path.basename(source))
+            for command in commands:
+                runner.run([mutant if a == '{}' else a for a in command], mutant, os.path.basename(source))
     finally:
         os.remove(mutant)
+
+
+def model_scene(model, work):
+    """An AR scene placing the (mutated) model `model` in the bundled room, playing its first clip."""
+    gltf = json.load(open(model))
+    entry = {'file': os.path.join(os.path.dirname(model), 'fuzz-mutant.gltf'), 'position': [0.1, 0.7, 0.0]}
+    if gltf.get('animations'):
+        entry['animation'] = {'clip': gltf['animations'][0].get('name', ''), 'speed': 1.0}
+    path = os.path.join(work, os.path.basename(model) + '.json')
+    json.dump({'models': [entry], 'lights': [{'position': [1.5, 2.8, 1.0], 'color': [1, 1, 1]}]}, open(path, 'w'))
+    return path
 
 
 def fuzz_tum(runner, rng, source, cases, work):
@@ -164,11 +180,17 @@ def main():
         oni = os.path.join(work, 'room.oni')
         subprocess.run([runner.artrace, 'convert', os.path.join(data, 'recordings', 'room'), '-o', oni], check=True,
                        capture_output=True)
-        text_inputs = [os.path.join(data, 'scenes', 'room.aff'), os.path.join(data, 'ar', 'demo.json')]
-        text_inputs += [os.path.join(data, 'models', m) for m in sorted(os.listdir(os.path.join(data, 'models')))]
-        for source in text_inputs:
-            fuzz_file(runner, rng, source, False, opt.cases, ["info"])
-        fuzz_file(runner, rng, oni, True, opt.cases, ["info"])
+        room = os.path.join(data, 'recordings', 'room')
+        frames = os.path.join(work, 'frames')  # export: three frames to PNG
+        export = ['export', room, '-o', frames, '--last', '2', '-q', '--scene']
+        fuzz_file(runner, rng, os.path.join(data, 'scenes', 'room.aff'), False, opt.cases,
+                  [['info', '{}'], ['render', '{}', '--width', '32', '--height', '24', '-o', os.path.join(work, 'r.png')],
+                   ['bench-bart', '--scene', '{}', '--frames', '3', '--width', '24', '--height', '16', '-q']])
+        fuzz_file(runner, rng, os.path.join(data, 'ar', 'demo.json'), False, opt.cases, [['info', '{}'], export + ['{}']])
+        for name in sorted(os.listdir(os.path.join(data, 'models'))):
+            model = os.path.join(data, 'models', name)
+            fuzz_file(runner, rng, model, False, opt.cases, [['info', '{}'], export + [model_scene(model, work)]])
+        fuzz_file(runner, rng, oni, True, opt.cases, [['info', '{}']])
         fuzz_tum(runner, rng, os.path.join(data, 'recordings', 'room'), opt.cases, work)
         fuzz_texture(runner, rng, opt.cases, work)
     print('%d runs, %d failures%s' % (runner.runs, runner.failures, ' (kept in %s)' % opt.keep if runner.failures else ''))
