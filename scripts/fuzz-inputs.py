@@ -112,7 +112,7 @@ def fuzz_file(runner, rng, source, binary, cases, commands):
 
 
 def model_scene(model, work):
-    """An AR scene placing the (mutated) model `model` in the bundled room, playing its first clip."""
+    """An AR scene placing the mutant of `model` (where fuzz_file writes it) in the room, playing its first clip."""
     gltf = json.load(open(model))
     entry = {'file': os.path.join(os.path.dirname(model), 'fuzz-mutant.gltf'), 'position': [0.1, 0.7, 0.0]}
     if gltf.get('animations'):

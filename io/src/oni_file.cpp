@@ -96,18 +96,16 @@ OniFileInfo inspect_oni(const std::filesystem::path& path) {
         uint32_t used = 0;
         const std::string name = b.str(f, used);
         for (const char c : name) {
-          // a byte of 0x80 or more in any property name crashed the player (SIGSEGV in libOniFile)
           if (c < 0x20 || c > 0x7e) {
             b.fail(at, "property name holds byte " + std::to_string(static_cast<unsigned char>(c)) +
-                           ", outside printable ASCII (OpenNI2's player crashes on such names)");
+                           ", outside printable ASCII (OpenNI2's player crashed on bytes above 127: SIGSEGV)");
           }
         }
-        OniNodeInfo& owner = info.nodes[node_index[node]];
-        owner.has_mode |= name == "xnMapOutputMode";
-        owner.has_cropping |= name == "xnCropping";
+        OniNodeInfo& n = info.nodes[node_index[node]];
+        n.has_mode |= name == "xnMapOutputMode";
+        n.has_cropping |= name == "xnCropping";
         if (type == 0x06 && name == "xnMapOutputMode") {
           if (b.get<uint32_t>(f + used) != 12) b.fail(at, "xnMapOutputMode must hold 12 bytes");
-          OniNodeInfo& n = owner;
           n.width = static_cast<int>(b.get<uint32_t>(f + used + 4));
           n.height = static_cast<int>(b.get<uint32_t>(f + used + 8));
           n.fps = static_cast<int>(b.get<uint32_t>(f + used + 12));
