@@ -150,7 +150,7 @@ class Parser {
   void expect_word(Lexer& lex, std::string_view word) {
     const Token t = expect_token(lex, std::string(word).c_str());
     if (t.text != word) {
-      fail(lex, t, "expected '" + std::string(word) + "', got \"" + std::string(t.text) + "\"");
+      fail(lex, t, "expected '" + std::string(word) + "', got " + quote_token(t.text));
     }
   }
 
@@ -161,9 +161,9 @@ class Parser {
     double v = 0.0;
     const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
     if (ec != std::errc() || end != s.data() + s.size()) {
-      fail(lex, t, std::string("expected ") + what + ", got \"" + std::string(t.text) + "\"");
+      fail(lex, t, std::string("expected ") + what + ", got " + quote_token(t.text));
     }
-    if (!std::isfinite(v)) fail(lex, t, std::string("expected ") + what + ", got the non-finite \"" + std::string(t.text) + "\"");
+    if (!std::isfinite(v)) fail(lex, t, std::string("expected ") + what + ", got the non-finite " + quote_token(t.text));
     return v;
   }
 
@@ -172,7 +172,7 @@ class Parser {
     long v = 0;
     const auto [end, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), v);
     if (ec != std::errc() || end != t.text.data() + t.text.size()) {
-      fail(lex, t, std::string("expected ") + what + " (an integer), got \"" + std::string(t.text) + "\"");
+      fail(lex, t, std::string("expected ") + what + " (an integer), got " + quote_token(t.text));
     }
     if (v < lo || v > hi) {
       fail(lex, t, std::string(what) + " " + std::to_string(v) + " is out of range [" + std::to_string(lo) + ", " +
@@ -196,7 +196,7 @@ class Parser {
 
   void open_brace(Lexer& lex, Scope scope) {
     const Token t = expect_token(lex, "'{'");
-    if (t.text != "{") fail(lex, t, "expected '{', got \"" + std::string(t.text) + "\"");
+    if (t.text != "{") fail(lex, t, "expected '{', got " + quote_token(t.text));
     scope.open = t;
     scope.file = lex.file();
     scopes_.push_back(std::move(scope));
@@ -280,7 +280,7 @@ class Parser {
       scopes_.pop_back();
       return;
     }
-    fail(lex, tok, "unknown record \"" + std::string(k) + "\"");
+    fail(lex, tok, "unknown record " + quote_token(k));
   }
 
   void view(Lexer& lex) {
@@ -433,7 +433,7 @@ class Parser {
       }
       t = expect_token(lex, "'triangles'");
     }
-    if (t.text != "triangles") fail(lex, t, "expected 'triangles' in mesh, got \"" + std::string(t.text) + "\"");
+    if (t.text != "triangles") fail(lex, t, "expected 'triangles' in mesh, got " + quote_token(t.text));
     const long nt = integer(lex, "the triangle count", 0, kMaxCount);
     for (long i = 0; i < nt; ++i) {
       glm::dvec3 p[3], n[3];
@@ -526,7 +526,7 @@ class Parser {
       if (t.text == "transl") anim.translation = TcbTrack(track(lex, false));
       else if (t.text == "rot") anim.rotation = TcbRotationTrack(track(lex, true));
       else if (t.text == "scale") anim.scale = TcbTrack(track(lex, false));
-      else fail(lex, t, "expected 'transl', 'rot', 'scale' or '}' in animation '" + anim.name + "', got \"" + std::string(t.text) + "\"");
+      else fail(lex, t, "expected 'transl', 'rot', 'scale' or '}' in animation '" + anim.name + "', got " + quote_token(t.text));
     }
     // A file included twice (the kitchen's wheels are) defines its animations again: the same
     // record is fine, a different one with the same name is an error.

@@ -40,7 +40,7 @@ int ppm_int(std::istream& in, const std::string& file, const char* what, int lo,
     used = 0;
   }
   if (used != tok.size() || v < lo || v > hi) {
-    throw ParseError(file, 0, 0, std::string("expected ") + what + " (" + std::to_string(lo) + ".." + std::to_string(hi) + "), got \"" + tok + "\"");
+    throw ParseError(file, 0, 0, std::string("expected ") + what + " (" + std::to_string(lo) + ".." + std::to_string(hi) + "), got " + quote_token(tok));
   }
   return static_cast<int>(v);
 }

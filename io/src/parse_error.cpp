@@ -12,6 +12,23 @@ std::string format(const std::string& file, int line, int column, const std::str
 
 }  // namespace
 
+std::string quote_token(std::string_view token) {
+  constexpr size_t kMax = 40;
+  static const char kHex[] = "0123456789abcdef";
+  std::string s = "\"";
+  for (size_t i = 0; i < token.size() && i < kMax; ++i) {
+    const auto c = static_cast<unsigned char>(token[i]);
+    if (c >= 0x20 && c < 0x7f) {
+      s += static_cast<char>(c);
+    } else {
+      s += "\\x";
+      s += kHex[c >> 4];
+      s += kHex[c & 15];
+    }
+  }
+  return s + (token.size() > kMax ? "\"..." : "\"");
+}
+
 ParseError::ParseError(std::string file, int line, int column, const std::string& message)
     : std::runtime_error(format(file, line, column, message)), file_(std::move(file)), line_(line), column_(column) {}
 

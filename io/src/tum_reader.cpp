@@ -36,7 +36,7 @@ double parse_number(const std::string& s, const std::filesystem::path& file, int
     used = 0;
   }
   if (used != s.size() || !std::isfinite(v)) {
-    throw ParseError(file.string(), line, 0, std::string("expected ") + what + ", got \"" + s + "\"");
+    throw ParseError(file.string(), line, 0, std::string("expected ") + what + ", got " + quote_token(s));
   }
   return v;
 }

@@ -200,6 +200,9 @@ TEST_F(AffFiles, MalformedInputNamesFileLineAndProblem) {
       {"view_keyword", "v\nfrom 0 0 0\nto 1 1 1\n", 3, "expected 'at'"},
       {"mesh_block", "m\nvertices 1\n0 0 0\nfaces 1\n", 4, "expected 'triangles' in mesh"},
       {"track_keyword", "k a\n{\nspin 1\n}\n", 3, "expected 'transl', 'rot', 'scale' or '}'"},
+      // a corrupt file's token: binary bytes escaped, and no more than 40 characters of it quoted
+      {"binary_token", "l 1 t\x01\xd6 3\n", 1, "got \"t\\x01\\xd6\""},
+      {"long_token", "l 1 yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy 3\n", 1, "got \"yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy\"..."},
   };
   for (const BadCase& c : cases) {
     const auto p = write(std::string(c.name) + ".aff", c.text);

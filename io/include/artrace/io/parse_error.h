@@ -3,6 +3,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace artrace::io {
 
@@ -19,5 +20,9 @@ class ParseError : public std::runtime_error {
   int line_;
   int column_;
 };
+
+/// `token` in double quotes for an error message: bytes outside printable ASCII as \xNN, and at most
+/// 40 characters of it followed by "..." (a corrupt file's token may be binary, or megabytes long).
+std::string quote_token(std::string_view token);
 
 }  // namespace artrace::io
