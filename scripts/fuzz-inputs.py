@@ -91,6 +91,7 @@ class Runner:
             status, message = 'timeout', ''
         if status == 'timeout' or status < 0 or status > 2:
             self.failures += 1
+            os.makedirs(self.keep, exist_ok=True)
             kept = os.path.join(self.keep, '%s-%d%s' % (label, self.failures, os.path.splitext(mutant)[1]))
             (shutil.copytree if os.path.isdir(mutant) else shutil.copy)(mutant, kept)
             print('FAIL %s: %s %s (%s)' % (status, ' '.join(args[:1]), kept, message), flush=True)
@@ -172,7 +173,6 @@ def main():
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--keep', default='fuzz-failures', help='folder for the mutants that failed')
     opt = ap.parse_args()
-    os.makedirs(opt.keep, exist_ok=True)
     rng = random.Random(opt.seed)
     runner = Runner(os.path.abspath(opt.artrace), opt.keep)
     data = os.path.join(root, 'data')
