@@ -28,6 +28,7 @@ import tempfile
 NUMBERS = ['0', '-1', '1e38', '-1e38', '3e38', 'nan', 'inf', '-inf', '4294967296', '2147483647', '-2147483648',
            '99999999999', '1e-45', '0.5', '65536', '1e300', '-0', '7', '100000000']
 NUMBER = re.compile(r'-?\d+(\.\d+)?([eE][-+]?\d+)?')
+MUTANT = 'fuzz-mutant'  # a mutant's name, next to its source, with the source's extension
 
 
 def mutate_text(s, rng):
@@ -101,7 +102,7 @@ def fuzz_file(runner, rng, source, binary, cases, commands):
     """Each mutant of `source` through each of `commands` ('{}' stands for the mutant's path)."""
     data = open(source, 'rb').read()
     # next to the source, so that relative references (models, recordings) still resolve
-    mutant = os.path.join(os.path.dirname(source), 'fuzz-mutant' + os.path.splitext(source)[1])
+    mutant = os.path.join(os.path.dirname(source), MUTANT + os.path.splitext(source)[1])
     try:
         for _ in range(cases):
             out = mutate_binary(data, rng, 65536) if binary else mutate_text(data.decode('latin1'), rng).encode('latin1')
@@ -115,7 +116,7 @@ def fuzz_file(runner, rng, source, binary, cases, commands):
 def model_scene(model, work):
     """An AR scene placing the mutant of `model` (where fuzz_file writes it) in the room, playing its first clip."""
     gltf = json.load(open(model))
-    entry = {'file': os.path.join(os.path.dirname(model), 'fuzz-mutant.gltf'), 'position': [0.1, 0.7, 0.0]}
+    entry = {'file': os.path.join(os.path.dirname(model), MUTANT + '.gltf'), 'position': [0.1, 0.7, 0.0]}
     if gltf.get('animations'):
         entry['animation'] = {'clip': gltf['animations'][0].get('name', ''), 'speed': 1.0}
     path = os.path.join(work, os.path.basename(model) + '.json')
@@ -177,10 +178,9 @@ def main():
     runner = Runner(os.path.abspath(opt.artrace), opt.keep)
     data = os.path.join(root, 'data')
     with tempfile.TemporaryDirectory() as work:
-        oni = os.path.join(work, 'room.oni')
-        subprocess.run([runner.artrace, 'convert', os.path.join(data, 'recordings', 'room'), '-o', oni], check=True,
-                       capture_output=True)
         room = os.path.join(data, 'recordings', 'room')
+        oni = os.path.join(work, 'room.oni')
+        subprocess.run([runner.artrace, 'convert', room, '-o', oni], check=True, capture_output=True)
         frames = os.path.join(work, 'frames')  # export: three frames to PNG
         export = ['export', room, '-o', frames, '--last', '2', '-q', '--scene']
         fuzz_file(runner, rng, os.path.join(data, 'scenes', 'room.aff'), False, opt.cases,
@@ -191,7 +191,7 @@ def main():
             model = os.path.join(data, 'models', name)
             fuzz_file(runner, rng, model, False, opt.cases, [['info', '{}'], export + [model_scene(model, work)]])
         fuzz_file(runner, rng, oni, True, opt.cases, [['info', '{}']])
-        fuzz_tum(runner, rng, os.path.join(data, 'recordings', 'room'), opt.cases, work)
+        fuzz_tum(runner, rng, room, opt.cases, work)
         fuzz_texture(runner, rng, opt.cases, work)
     print('%d runs, %d failures%s' % (runner.runs, runner.failures, ' (kept in %s)' % opt.keep if runner.failures else ''))
     return 1 if runner.failures else 0

@@ -132,7 +132,7 @@ TEST(Oni, DamagedFilesAreRefusedWithTheFileNamed) {
       {"no_end.oni", bytes.substr(0, bytes.size() - 28), "no End record"},
       {"garbled.oni", bad_magic, "corrupt"},
       {"codec0.oni", codec0, "codec 0"},
-      {"high_byte_name.oni", high_byte, "property name holds byte 214, outside printable ASCII"},
+      {"high_byte_name.oni", high_byte, "name holds byte 214, outside printable ASCII"},
       {"no_cropping.oni", no_cropping, "before its xnCropping property"},
   };
   for (const Damage &d : cases) {

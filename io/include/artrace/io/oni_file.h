@@ -1,6 +1,6 @@
 // Structure check of ONI files before OpenNI2 sees them: OpenNI2's player crashes on some corrupt
-// files (a node without StateReady, codec 0, a property name outside ASCII), so every record is
-// walked here first.
+// files (a node without StateReady, codec 0, a property name with a byte above 127), so every
+// record is walked here first.
 #pragma once
 
 #include <cstdint>
