@@ -125,6 +125,16 @@ std::vector<T> crop(const std::vector<T>& image, int width, const Rect& r, int c
   return out;
 }
 
+/// A projected coordinate as a pixel bound in [0, n], clamped while still a float: a corner of a
+/// large object near the camera plane, or a shadow volume's vanishing point, can project billions
+/// of pixels off screen (or to infinity), and converting such a float to int is undefined (the
+/// sanitizer build got INT_MIN; in the release build the rectangles came out empty: no objects
+/// traced, no shadows on the real surfaces).
+int to_pixel(float x, int n) {
+  if (!(x > 0.0f)) return 0;
+  return x < static_cast<float>(n) ? static_cast<int>(x) : n;
+}
+
 /// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
 /// shadow volume (the box, and its corners pushed away from the light to infinity, which project
 /// to their vanishing points). The whole image when a volume reaches behind the camera.
@@ -155,8 +165,8 @@ Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, 
     }
   }
   if (!(minx <= maxx)) return Rect{0, 0, 0, 0};
-  return Rect{std::clamp(static_cast<int>(std::floor(minx)) - 2, 0, w), std::clamp(static_cast<int>(std::floor(miny)) - 2, 0, h),
-              std::clamp(static_cast<int>(std::ceil(maxx)) + 2, 0, w), std::clamp(static_cast<int>(std::ceil(maxy)) + 2, 0, h)};
+  return Rect{to_pixel(std::floor(minx) - 2.0f, w), to_pixel(std::floor(miny) - 2.0f, h), to_pixel(std::ceil(maxx) + 2.0f, w),
+              to_pixel(std::ceil(maxy) + 2.0f, h)};
 }
 
 /// A light that reaches a real point only through virtual objects but is blocked by the real
@@ -360,10 +370,10 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     maxy = std::max(maxy, v);
   }
   if (!behind) {
-    x0 = std::clamp(static_cast<int>(std::floor(minx)) - 1, 0, w);
-    x1 = std::clamp(static_cast<int>(std::ceil(maxx)) + 1, 0, w);
-    y0 = std::clamp(static_cast<int>(std::floor(miny)) - 1, 0, h);
-    y1 = std::clamp(static_cast<int>(std::ceil(maxy)) + 1, 0, h);
+    x0 = to_pixel(std::floor(minx) - 1.0f, w);
+    x1 = to_pixel(std::ceil(maxx) + 1.0f, w);
+    y0 = to_pixel(std::floor(miny) - 1.0f, h);
+    y1 = to_pixel(std::ceil(maxy) + 1.0f, h);
   }
   // the virtual objects' shadows on the real surfaces (they may fall outside the objects' rectangle)
   const std::vector<glm::vec3>* shadow_ptr = nullptr;

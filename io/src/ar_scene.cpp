@@ -5,13 +5,18 @@
 #include <nlohmann/json.hpp>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <set>
+#include <sstream>
 
 namespace artrace::io {
 namespace {
 
 using nlohmann::json;
+
+/// The largest magnitude an AR scene's number may have (1,000 km in metres).
+constexpr double kMaxMagnitude = 1e6;
 
 class Checker {
  public:
@@ -25,11 +30,24 @@ class Checker {
   }
   glm::vec3 vec3(const json& j, const std::string& key) const {
     if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number()) fail(key, "expected 3 numbers");
-    return {j[0].get<float>(), j[1].get<float>(), j[2].get<float>()};
+    return {in_range(j[0], key), in_range(j[1], key), in_range(j[2], key)};
   }
   float number(const json& j, const std::string& key) const {
     if (!j.is_number()) fail(key, "expected a number");
-    return j.get<float>();
+    return in_range(j, key);
+  }
+  /// A JSON number as a float, refused beyond +-kMaxMagnitude. The keys hold metres, degrees,
+  /// colours and factors, where nothing sensible comes near it, and far beyond it the renderer's
+  /// float arithmetic breaks down (a light at 3e38 has an infinite squared distance and lights
+  /// nothing). Checked as a double: the conversion to float overflows first (1e39).
+  float in_range(const json& j, const std::string& key) const {
+    const double v = j.get<double>();
+    if (!(std::fabs(v) <= kMaxMagnitude)) {
+      std::ostringstream what;
+      what << "expected a number between " << -kMaxMagnitude << " and " << kMaxMagnitude << ", got " << v;
+      fail(key, what.str());
+    }
+    return static_cast<float>(v);
   }
   std::string string(const json& j, const std::string& key) const {
     if (!j.is_string()) fail(key, "expected a string");

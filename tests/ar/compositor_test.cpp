@@ -86,8 +86,7 @@ struct WallShadow {
   int in_shadow = 0, wrong = 0, boundary = 0;  ///< wrong: darkened outside the shadow, or not inside
 };
 WallShadow check_wall_shadow(const SensorFrame& frame, const ColorImage& out, const core::TwoLevelScene& scene,
-                             float passing) {
-  const VirtualLight& light = kLight;
+                             float passing, const VirtualLight& light = kLight) {
   const float ambient = shadow_options().ambient;
   WallShadow r;
   auto shadowed = [&](int x, int y) {
@@ -157,6 +156,36 @@ TEST(Compositor, VirtualBoxCastsItsShadowOnTheRealWall) {
   const int cx = static_cast<int>(centre_of_shadow.x), cy = static_cast<int>(centre_of_shadow.y);
   EXPECT_EQ(plain.at(cx, cy)[0], frame.color.at(cx, cy)[0]);
   EXPECT_LT(out.at(cx, cy)[0], frame.color.at(cx, cy)[0]);
+}
+
+/// A virtual object reaching almost to the camera plane far to the side projects billions of
+/// pixels off screen, and so do the vanishing points of a shadow volume lit from beside the camera.
+/// The screen rectangles (objects traced, real points shadowed) must then cover the screen; they
+/// used to come out empty (a float beyond int converted to int), which left out the box and its
+/// shadow. Here: a sliver triangle 100 km wide, 50 m below the camera and 2-3 mm in front of it
+/// (out of sight of the wall and of the light's rays to it), and the light 1.5 mm in front of it.
+TEST(Compositor, ObjectsProjectingFarOffScreenKeepTheirPixelsAndShadows) {
+  const SensorFrame frame = wall_frame();
+  core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
+  scene.add_instance(scene.add_rigid_mesh(box(kBoxLo, kBoxHi)), glm::mat4(1.0f));
+  const std::vector<core::Triangle> ground{{{-5e4f, 50.0f, 0.002f}, {5e4f, 50.0f, 0.002f}, {0.0f, 50.1f, 0.003f}}};
+  scene.add_instance(scene.add_rigid_mesh(ground), glm::mat4(1.0f));
+  scene.commit();
+  const VirtualLight light{{0.0f, -0.5f, 0.0015f}, {0.9f, 0.8f, 0.7f}};
+  CompositeOptions opt = shadow_options();
+  opt.lights = {light};
+  const MaterialLookup diffuse = [](const core::Hit&) { return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f), 1.5f}; };
+  const ColorImage out = composite(frame, scene, diffuse, opt);
+
+  // the box is drawn where it is seen: its centre's pixel is no longer the wall's
+  const glm::vec3 centre = 0.5f * (kBoxLo + kBoxHi);
+  const int bx = static_cast<int>(kCx + kF * centre.x / centre.z + 0.5), by = static_cast<int>(kCy + kF * centre.y / centre.z + 0.5);
+  const uint8_t* seen = out.at(bx, by);
+  const uint8_t* wall = frame.color.at(bx, by);
+  EXPECT_TRUE(seen[0] != wall[0] || seen[1] != wall[1] || seen[2] != wall[2]) << "the box is not drawn";
+  const WallShadow check = check_wall_shadow(frame, out, scene, 0.0f, light);
+  EXPECT_GT(check.in_shadow, 200) << "the shadow is on the wall";
+  EXPECT_EQ(check.wrong, 0) << "pixels darkened outside the analytic shadow, or left lit inside it";
 }
 
 /// A glass box given its triangles' transmittance darkens the wall where the opaque box would,

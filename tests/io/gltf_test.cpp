@@ -177,6 +177,38 @@ TEST(ArRuntime, TheThreeKindsOfObjectsStaticAnimatedAndSkinned) {
   std::filesystem::remove_all(dir);
 }
 
+/// Malformed AR scene files: a ParseError naming the file, the key and the problem, for an unknown
+/// key, a wrong type, and numbers too large for the renderer's float arithmetic (3e38 is a float,
+/// 1e39 is not even that).
+TEST(ArSceneFile, MalformedScenesNameFileKeyAndProblem) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_malformed";
+  std::filesystem::create_directories(dir);
+  write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
+  const std::pair<const char*, const char*> cases[] = {
+      {R"({ "models": [ { "file": "box.gltf", "positon": [0, 0, 0] } ] })", "models[0].positon: unknown key"},
+      {R"({ "models": [ { "file": "box.gltf", "position": [0, 0] } ] })", "models[0].position: expected 3 numbers"},
+      {R"({ "lights": [ { "position": [3e38, 2.8, 1.0] } ] })", "lights[0].position: expected a number between -1e+06 and 1e+06, got 3e+38"},
+      {R"({ "lights": [ { "position": [1.0, 2.8, 1e39] } ] })", "lights[0].position: expected a number between -1e+06 and 1e+06, got 1e+39"},
+      {R"({ "models": [ { "file": "box.gltf", "scale": -2e6 } ] })", "models[0].scale: expected a number between -1e+06 and 1e+06, got -2e+06"},
+      {R"({ "ambient": "bright" })", "ambient: expected a number"},
+  };
+  for (const auto& [text, expected] : cases) {
+    std::ofstream(dir / "scene.json") << text;
+    try {
+      load_ar_scene(dir / "scene.json");
+      ADD_FAILURE() << "accepted " << text;
+    } catch (const ParseError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("scene.json"), std::string::npos) << what;
+      EXPECT_NE(what.find(expected), std::string::npos) << what;
+    }
+  }
+  // the bounds themselves are accepted
+  std::ofstream(dir / "scene.json") << R"({ "lights": [ { "position": [1e6, -1e6, 0.5] } ] })";
+  EXPECT_EQ(load_ar_scene(dir / "scene.json").lights.at(0).position, glm::vec3(1e6f, -1e6f, 0.5f));
+  std::filesystem::remove_all(dir);
+}
+
 /// Glass of each kind gives the scene its transmittance: a shadow ray through a glass box (two
 /// faces) keeps T^2 of the light, static or node-animated, and one through the skinned tube some
 /// but not all of it; the same models, not glass, block it.

@@ -10,8 +10,9 @@
 //     "ambient": 0.3
 //   }
 //
-// Paths are relative to the JSON file. Every key is checked: an unknown key or a wrong type is an
-// error naming the file and the key ("scene.json: models[1].rotation_deg: expected 3 numbers").
+// Paths are relative to the JSON file. Every key is checked: an unknown key, a wrong type or a
+// number beyond +-1e6 is an error naming the file and the key ("scene.json:
+// models[1].rotation_deg: expected 3 numbers").
 // Without lights, one light is estimated from the frame's brightness (see ar::Compositor).
 #pragma once
 
