@@ -287,7 +287,7 @@ void add_bench_bart_command(CLI::App& app) {
   cmd->add_option("--secondary", opt->secondary, "trace reflection/refraction rays regrouped into packets or as single rays")
       ->capture_default_str()
       ->check(CLI::IsMember({"packets", "single"}));
-  cmd->add_option("--min-weight", opt->min_weight, "no secondary ray whose weight is below this (0: every ray)")->capture_default_str();
+  cmd->add_option("--min-weight", opt->min_weight, "no secondary ray whose weight is below this (0: every ray)")->capture_default_str()->check(finite_range(0, 1));
   cmd->add_option("--write-frames", opt->frames_dir, "folder to write rendered frames to as PNG");
   cmd->add_option("--every", opt->every, "with --write-frames: every n-th frame")->capture_default_str()->check(CLI::Range(1, 100000));
   cmd->add_option("--json", opt->json, "write the results (with per-frame times) as JSON");
@@ -306,10 +306,10 @@ void add_bench_bart_command(CLI::App& app) {
   rep->add_option("--kitchen", ro->kitchen, "BART kitchen .aff")->check(CLI::ExistingFile);
   rep->add_option("--robots", ro->robots, "BART robots .aff")->check(CLI::ExistingFile);
   rep->add_option("--frames", ro->frames, "frames per cell")->capture_default_str()->check(CLI::Range(1, 100000));
-  rep->add_option("--width", ro->width, "image width")->capture_default_str();
-  rep->add_option("--height", ro->height, "image height")->capture_default_str();
-  rep->add_option("--threads", ro->threads, "worker threads (0 = all cores)")->capture_default_str();
-  rep->add_option("--min-weight", ro->min_weight, "no secondary ray whose weight is below this")->capture_default_str();
+  rep->add_option("--width", ro->width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
+  rep->add_option("--height", ro->height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
+  add_threads_option(rep, ro->threads);
+  rep->add_option("--min-weight", ro->min_weight, "no secondary ray whose weight is below this")->capture_default_str()->check(finite_range(0, 1));
   rep->add_option("-o,--out", ro->out, "folder for table1.md, table1.json and the figures")->capture_default_str();
   rep->callback([ro] {
     if (ro->kitchen.empty() && ro->robots.empty()) throw std::invalid_argument("report-bart: give --kitchen and/or --robots");

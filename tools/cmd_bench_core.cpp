@@ -384,13 +384,13 @@ void add_bench_core_command(CLI::App& app) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("bench-core", "kd-tree build time and ray throughput (verified, then timed)");
   cmd->add_option("--scene", opt->scene, "BART .aff scene")->required()->check(CLI::ExistingFile);
-  cmd->add_option("--time", opt->time, "scene time t (camera from its track)")->capture_default_str();
+  cmd->add_option("--time", opt->time, "scene time t (camera from its track)")->capture_default_str()->check(finite_range(-1e6, 1e6));
   cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
   cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
+  add_threads_option(cmd, opt->threads);
   cmd->add_option("--runs", opt->runs, "timed runs after the warm-up (median reported)")->capture_default_str()->check(CLI::Range(1, 1000));
   cmd->add_option("--subdivide", opt->subdivide, "split every triangle into 4, this many times")->capture_default_str()->check(CLI::Range(0, 4));
-  cmd->add_option("--verify-rays", opt->verify_rays, "primary rays checked against brute force")->capture_default_str();
+  cmd->add_option("--verify-rays", opt->verify_rays, "primary rays checked against brute force")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--reference", opt->reference, "also time the same rays with: none, embree")
       ->capture_default_str()->check(CLI::IsMember({"none", "embree"}));
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
@@ -399,12 +399,13 @@ void add_bench_core_command(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--json", opt->json, "write the results as JSON");
-  cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str();
-  cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str();
-  cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str();
+  cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str()->check(finite_range(0.001, 1000));
+  cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str()->check(finite_range(0.001, 1000));
+  cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str()->check(finite_range(0, 1));
   cmd->add_option("--binned-above", opt->build.binned_above,
                   "nodes of more triangles split by binned SAH (0: the exact sweep everywhere)")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000000000));
   cmd->callback([opt] { run(*opt); });
 }
 

@@ -127,7 +127,7 @@ void add_bench_dynamic_command(CLI::App& app) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("bench-dynamic", "Play a BART animation through the update API and time it");
   add_animation_options(cmd, *opt);
-  cmd->add_option("--rebuild-frames", opt->rebuild_frames, "frames for the rebuild-everything baseline (0 = all)")->capture_default_str();
+  cmd->add_option("--rebuild-frames", opt->rebuild_frames, "frames for the rebuild-everything baseline (0 = all)")->capture_default_str()->check(CLI::Range(0, 100000));
   cmd->add_option("--write-frames", opt->frames_dir, "folder to write every rendered frame to as PNG");
   cmd->add_option("--json", opt->json, "write the results as JSON");
   cmd->callback([opt] { run(*opt); });

@@ -116,11 +116,11 @@ void add_bench_occlusion_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand("bench-occlusion", "Occlusion-mask accuracy on a synthetic recording with Kinect-like depth");
   cmd->add_option("--scene", opt->scene, "AFF scene the recording is rendered from")->required()->check(CLI::ExistingFile);
   cmd->add_option("--frames", opt->frames, "frames")->capture_default_str()->check(CLI::Range(2, 10000));
-  cmd->add_option("--width", opt->width, "image width")->capture_default_str();
-  cmd->add_option("--height", opt->height, "image height")->capture_default_str();
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  cmd->add_option("--box-min", opt->box_lo, "virtual box corner (world)")->expected(3);
-  cmd->add_option("--box-max", opt->box_hi, "virtual box corner (world)")->expected(3);
+  cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(8, 4096));
+  cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(8, 4096));
+  add_threads_option(cmd, opt->threads);
+  cmd->add_option("--box-min", opt->box_lo, "virtual box corner (world)")->expected(3)->check(finite_range(-1e6, 1e6));
+  cmd->add_option("--box-max", opt->box_hi, "virtual box corner (world)")->expected(3)->check(finite_range(-1e6, 1e6));
   cmd->add_option("--json", opt->json, "write iou, boundary_px, jitter_px as JSON");
   cmd->add_option("--debug-png", opt->debug_png, "write the middle frame's mask errors as a picture");
   cmd->callback([opt] { run(*opt); });

@@ -157,14 +157,14 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
   cmd->add_option("--scene", opt->scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder for numbered PNGs")->required();
-  cmd->add_option("--first", opt->first, "first frame")->capture_default_str();
-  cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str();
+  cmd->add_option("--first", opt->first, "first frame")->capture_default_str()->check(CLI::Range(0, 100000000));
+  cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
-  cmd->add_option("--fps", opt->fps, "frame rate of a video clip")->capture_default_str()->check(CLI::Range(1.0, 1000.0));
+  cmd->add_option("--fps", opt->fps, "frame rate of a video clip")->capture_default_str()->check(finite_range(1.0, 1000.0));
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
+  add_threads_option(cmd, opt->threads);
   cmd->callback([opt] { run(*opt); });
 
   auto dir = std::make_shared<std::string>();

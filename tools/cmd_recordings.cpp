@@ -128,11 +128,13 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--fps", opt->synth.fps, "frame rate")->capture_default_str()->check(CLI::Range(1, 1000));
     cmd->add_option("--width", opt->synth.width, "image width")->capture_default_str()->check(CLI::Range(8, 4096));
     cmd->add_option("--height", opt->synth.height, "image height")->capture_default_str()->check(CLI::Range(8, 4096));
-    cmd->add_option("--fov", opt->synth.fov_y_deg, "vertical field of view in degrees")->capture_default_str();
-    cmd->add_option("--orbit", opt->synth.orbit_deg, "degrees the camera orbits over the clip (scenes without a camera track)")->capture_default_str();
+    cmd->add_option("--fov", opt->synth.fov_y_deg, "vertical field of view in degrees")->capture_default_str()->check(finite_range(1, 179));
+    cmd->add_option("--orbit", opt->synth.orbit_deg, "degrees the camera orbits over the clip (scenes without a camera track)")
+        ->capture_default_str()
+        ->check(finite_range(-36000, 36000));
     cmd->add_flag("--kinect", opt->kinect, "apply the Kinect-like depth model (noise, quantisation, holes, offset)");
     cmd->add_option("--seed", opt->synth.seed, "seed of the depth model")->capture_default_str();
-    cmd->add_option("--threads", opt->synth.threads, "worker threads (0 = all cores)")->capture_default_str();
+    add_threads_option(cmd, opt->synth.threads);
     cmd->callback([opt] {
       if (opt->kinect) opt->synth.depth_model = ar::DepthModel{};
       const io::AffScene scene = io::load_aff(opt->scene);
@@ -173,7 +175,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("source", opt->source, "TUM folder or .oni file")->required();
     cmd->add_option("-o,--output", opt->output, "trajectory file to write (TUM format)")->required();
     cmd->add_option("--method", opt->odometry.method, "RgbdICPOdometry, RgbdOdometry or ICPOdometry")->capture_default_str();
-    cmd->add_option("--frames", opt->odometry.max_frames, "frames to track (0 = all)")->capture_default_str();
+    cmd->add_option("--frames", opt->odometry.max_frames, "frames to track (0 = all)")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->add_option("--json", opt->json, "write the drift report as JSON");
     cmd->callback([opt] {
       auto in = io::open_recording(opt->source);

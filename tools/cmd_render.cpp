@@ -21,11 +21,11 @@ void add_render_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand("render", "Render one frame of an AFF scene to PNG (eye-light shading)");
   cmd->add_option("scene", opt->scene, "BART .aff scene file")->required()->check(CLI::ExistingFile);
   cmd->add_option("-o,--output", opt->output, "PNG file to write")->capture_default_str();
-  cmd->add_option("--time", opt->time, "scene time t")->capture_default_str();
-  cmd->add_option("--frame", opt->frame, "frame index of the scene's animation (overrides --time)");
+  cmd->add_option("--time", opt->time, "scene time t")->capture_default_str()->check(finite_range(-1e6, 1e6));
+  cmd->add_option("--frame", opt->frame, "frame index of the scene's animation (overrides --time)")->check(CLI::Range(0, 100000000));
   cmd->add_option("--width", opt->width, "image width")->capture_default_str()->check(CLI::Range(1, 16384));
   cmd->add_option("--height", opt->height, "image height")->capture_default_str()->check(CLI::Range(1, 16384));
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
+  add_threads_option(cmd, opt->threads);
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
   cmd->add_flag("--single", opt->single, "trace single rays instead of packets");
   cmd->callback([opt] {

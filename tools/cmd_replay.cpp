@@ -315,10 +315,10 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--scene", opt->scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--speed", opt->speed, "playback speed relative to the recording's rate")
       ->capture_default_str()
-      ->check(CLI::Range(0.01, 100.0));
+      ->check(finite_range(0.01, 100.0));
   cmd->add_flag("--loop", opt->loop, "start again at the end (otherwise it pauses on the last frame)");
-  cmd->add_option("--threads", opt->threads, "worker threads (0 = all cores)")->capture_default_str();
-  cmd->add_option("--frames", opt->frames, "quit after showing this many frames (0: run until q)")->capture_default_str();
+  add_threads_option(cmd, opt->threads);
+  cmd->add_option("--frames", opt->frames, "quit after showing this many frames (0: run until q)")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--keys", opt->keys, "keys to press first, one per shown frame (e.g. \"o\" starts without occlusion)");
   cmd->add_option("--screenshot", opt->screenshot, "on quitting, save the last view (with its head-up display) as PNG");
   cmd->callback([opt] {

@@ -5,7 +5,9 @@
 
 #include "artrace/core/renderer.h"
 
+#include <cstdlib>
 #include <filesystem>
+#include <sstream>
 #include <string>
 
 namespace artrace::tools {
@@ -19,6 +21,29 @@ void add_export_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_bench_bart_command(CLI::App& app);
 
+/// A number that is finite and within [lo, hi]. CLI::Range lets NaN through (NaN fails no
+/// comparison), and "nan" or "inf" parse as numbers.
+inline CLI::Validator finite_range(double lo, double hi) {
+  std::ostringstream desc;
+  desc << "FLOAT in [" << lo << " - " << hi << "]";
+  return CLI::Validator(
+      [lo, hi](std::string& s) {
+        char* end = nullptr;
+        const double v = std::strtod(s.c_str(), &end);
+        if (end == s.c_str() || *end != '\0') return "Value " + s + " is not a number";
+        if (v >= lo && v <= hi) return std::string();
+        std::ostringstream m;
+        m << "Value " << s << " not in range " << lo << " to " << hi;
+        return m.str();
+      },
+      desc.str());
+}
+
+/// --threads, 0 (every core) to 1024.
+inline void add_threads_option(CLI::App* cmd, int& threads) {
+  cmd->add_option("--threads", threads, "worker threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
+}
+
 /// Options of the commands that play a BART animation.
 struct AnimationOptions {
   std::string scene, config = "kdtree+bvh";
@@ -31,7 +56,7 @@ inline void add_animation_options(CLI::App* cmd, AnimationOptions& o) {
   cmd->add_option("--frames", o.frames, "frames to render (spread over the animation)")->capture_default_str()->check(CLI::Range(1, 100000));
   cmd->add_option("--width", o.width, "image width")->capture_default_str()->check(CLI::Range(8, 16384));
   cmd->add_option("--height", o.height, "image height")->capture_default_str()->check(CLI::Range(8, 16384));
-  cmd->add_option("--threads", o.threads, "worker threads (0 = all cores)")->capture_default_str();
+  add_threads_option(cmd, o.threads);
   cmd->add_option("--config", o.config, "bvh or kdtree+bvh")->capture_default_str()->check(CLI::IsMember({"bvh", "kdtree+bvh"}));
 }
 

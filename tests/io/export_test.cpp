@@ -71,5 +71,43 @@ TEST(Export, StoppedExportLeavesNoFile) {
   std::filesystem::remove_all(dir);
 }
 
+/// Numeric options out of their range, NaN and infinities included (CLI11's own range check lets
+/// NaN through, and an export with --fps nan then failed inside OpenCV with a misleading message):
+/// refused before any work, naming the option.
+TEST(Cli, OutOfRangeOptionsAreRefusedByName) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_cli_ranges";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string room = (kRoot / "data/recordings/room").string(), aff = (kRoot / "data/scenes/room.aff").string();
+  const std::string scene = (kRoot / "data/ar/demo.json").string(), out = (dir / "out").string();
+  const std::pair<std::string, std::string> cases[] = {
+      {"render " + aff + " --time nan -o " + out + ".png", "--time"},
+      {"render " + aff + " --time inf -o " + out + ".png", "--time"},
+      {"render " + aff + " --frame -3 -o " + out + ".png", "--frame"},
+      {"render " + aff + " --threads -2 -o " + out + ".png", "--threads"},
+      {"export " + room + " --scene " + scene + " -o " + out + ".avi --fps nan", "--fps"},
+      {"export " + room + " --scene " + scene + " -o " + out + " --first -1", "--first"},
+      {"replay " + room + " --scene " + scene + " --speed nan", "--speed"},
+      {"synth --scene " + aff + " -o " + out + " --fov 0", "--fov"},
+      {"synth --scene " + aff + " -o " + out + " --orbit nan", "--orbit"},
+      {"bench-bart --scene " + aff + " --min-weight nan", "--min-weight"},
+      {"bench-core --scene " + aff + " --sah-intersection 0", "--sah-intersection"},
+      {"bench-occlusion --scene " + aff + " --box-min 0 nan 0", "--box-min"},
+      {"track " + room + " -o " + out + ".txt --frames -1", "--frames"},
+  };
+  const auto log = dir / "log.txt";
+  for (const auto& [args, option] : cases) {
+    EXPECT_NE(run(std::string(ARTRACE_BINARY) + " " + args + " > " + log.string() + " 2>&1"), 0) << args;
+    std::ifstream in(log);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find(option + ": Value"), std::string::npos) << args << "\n" << text;
+    EXPECT_NE(text.find("not in range"), std::string::npos) << args << "\n" << text;
+  }
+  EXPECT_FALSE(std::filesystem::exists(out)) << "nothing was written";
+  EXPECT_FALSE(std::filesystem::exists(out + ".png"));
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace artrace::io
