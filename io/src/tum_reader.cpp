@@ -87,6 +87,11 @@ ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
     if (std::fabs(s.rotation.norm() - 1.0) > 1e-3) {
       throw ParseError(path.string(), n, 0, "quaternion has norm " + std::to_string(s.rotation.norm()) + ", not 1");
     }
+    // metres: a camera 1,000 km away is a broken file, and beyond float range (the renderer's
+    // camera) it would be infinite
+    for (int i = 1; i <= 3; ++i) {
+      if (!(std::fabs(v[i]) <= 1e6)) throw ParseError(path.string(), n, 0, "translation " + quote_token(w[i]) + " is beyond +-1e6 m");
+    }
     if (!samples.empty() && !(s.time_s > samples.back().time_s)) {
       throw ParseError(path.string(), n, 0, "timestamp " + w[0] + " does not come after the previous one");
     }

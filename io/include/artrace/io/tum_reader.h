@@ -6,8 +6,8 @@
 // - an image that exists but does not decode, or a depth PNG that is not 16-bit one-channel:
 //   io::ParseError naming the file when that frame is read;
 // - depth 0 and 65535 (saturated): no reading (0 in the frame);
-// - a timestamp list out of order, an unparsable line, a trajectory with a non-unit quaternion or
-//   out-of-order times: io::ParseError naming file and line, at open;
+// - a timestamp list out of order, an unparsable line, a trajectory with a non-unit quaternion, a
+//   translation beyond +-1e6 m or out-of-order times: io::ParseError naming file and line, at open;
 // - colour frames without a depth frame within `max_dt_s`: skipped with a warning;
 // - no groundtruth.txt: frames have no pose; poses more than `max_pose_gap_s` from a trajectory
 //   sample on either side: that frame has no pose.
