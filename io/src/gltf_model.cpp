@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <limits>
+#include <sstream>
 
 namespace artrace::io {
 namespace {
@@ -35,7 +37,12 @@ std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, c
       const unsigned char* q = p + c * csize;
       float f = 0.0f;
       switch (a.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&f, q, 4); break;
+        case TINYGLTF_COMPONENT_TYPE_FLOAT:
+          std::memcpy(&f, q, 4);
+          if (!std::isfinite(f)) {
+            throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + " holds a non-finite float (element " + std::to_string(i) + ")");
+          }
+          break;
         case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = *q / (a.normalized ? 255.0f : 1.0f); break;
         case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, q, 2); f = s / (a.normalized ? 65535.0f : 1.0f); break; }
         case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, q, 2); f = a.normalized ? std::fmax(s / 32767.0f, -1.0f) : s; break; }
@@ -45,6 +52,24 @@ std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, c
       out[i * n + c] = f;
     }
   }
+  return out;
+}
+
+/// A number of the glTF JSON as a float; one beyond the float range (or not finite) is an error.
+float to_float(double v, const std::string& file, const std::string& what) {
+  if (!(std::fabs(v) <= static_cast<double>(std::numeric_limits<float>::max()))) {
+    std::ostringstream m;
+    m << what << " is " << v << ", beyond the float range";
+    throw ParseError(file, 0, 0, m.str());
+  }
+  return static_cast<float>(v);
+}
+
+/// `values` (3 or 4 of them, as the glTF JSON holds them) as floats, each checked by to_float.
+template <class Vec>
+Vec to_floats(const std::vector<double>& values, const std::string& file, const std::string& what) {
+  Vec out;
+  for (int k = 0; k < Vec::length(); ++k) out[k] = to_float(values[static_cast<size_t>(k)], file, what);
   return out;
 }
 
@@ -84,14 +109,17 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     GltfMaterial g;
     g.name = mat.name;
     const auto& pbr = mat.pbrMetallicRoughness;
-    if (pbr.baseColorFactor.size() == 4) g.base_color = glm::vec3(pbr.baseColorFactor[0], pbr.baseColorFactor[1], pbr.baseColorFactor[2]);
-    g.metallic = static_cast<float>(pbr.metallicFactor);
-    g.roughness = static_cast<float>(pbr.roughnessFactor);
-    if (mat.alphaMode == "BLEND" && pbr.baseColorFactor.size() == 4) g.transmission = 1.0f - static_cast<float>(pbr.baseColorFactor[3]);
+    const std::string at = "material '" + mat.name + "'";
+    if (pbr.baseColorFactor.size() == 4) g.base_color = to_floats<glm::vec3>(pbr.baseColorFactor, file, at + " baseColorFactor");
+    g.metallic = to_float(pbr.metallicFactor, file, at + " metallicFactor");
+    g.roughness = to_float(pbr.roughnessFactor, file, at + " roughnessFactor");
+    if (mat.alphaMode == "BLEND" && pbr.baseColorFactor.size() == 4) g.transmission = 1.0f - to_float(pbr.baseColorFactor[3], file, at + " alpha");
     const auto t = mat.extensions.find("KHR_materials_transmission");
-    if (t != mat.extensions.end() && t->second.Has("transmissionFactor")) g.transmission = static_cast<float>(t->second.Get("transmissionFactor").GetNumberAsDouble());
+    if (t != mat.extensions.end() && t->second.Has("transmissionFactor")) {
+      g.transmission = to_float(t->second.Get("transmissionFactor").GetNumberAsDouble(), file, at + " transmissionFactor");
+    }
     const auto i = mat.extensions.find("KHR_materials_ior");
-    if (i != mat.extensions.end() && i->second.Has("ior")) g.ior = static_cast<float>(i->second.Get("ior").GetNumberAsDouble());
+    if (i != mat.extensions.end() && i->second.Has("ior")) g.ior = to_float(i->second.Get("ior").GetNumberAsDouble(), file, at + " ior");
     out.materials.push_back(g);
   }
   for (const tinygltf::Mesh& mesh : m.meshes) {
@@ -172,11 +200,14 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     if (g.skin >= 0 && (g.mesh < 0 || !out.meshes[g.mesh].skinned())) throw ParseError(file, 0, 0, "node '" + src.name + "' has a skin but no mesh with JOINTS_0/WEIGHTS_0");
     if (src.matrix.size() == 16) {
       g.has_matrix = true;
-      for (int k = 0; k < 16; ++k) glm::value_ptr(g.matrix)[k] = static_cast<float>(src.matrix[k]);
+      for (int k = 0; k < 16; ++k) glm::value_ptr(g.matrix)[k] = to_float(src.matrix[k], file, "node '" + src.name + "' matrix");
     }
-    if (src.translation.size() == 3) g.translation = glm::vec3(src.translation[0], src.translation[1], src.translation[2]);
-    if (src.rotation.size() == 4) g.rotation = glm::quat(static_cast<float>(src.rotation[3]), static_cast<float>(src.rotation[0]), static_cast<float>(src.rotation[1]), static_cast<float>(src.rotation[2]));
-    if (src.scale.size() == 3) g.scale = glm::vec3(src.scale[0], src.scale[1], src.scale[2]);
+    if (src.translation.size() == 3) g.translation = to_floats<glm::vec3>(src.translation, file, "node '" + src.name + "' translation");
+    if (src.rotation.size() == 4) {
+      const glm::vec4 q = to_floats<glm::vec4>(src.rotation, file, "node '" + src.name + "' rotation");
+      g.rotation = glm::quat(q.w, q.x, q.y, q.z);
+    }
+    if (src.scale.size() == 3) g.scale = to_floats<glm::vec3>(src.scale, file, "node '" + src.name + "' scale");
     out.nodes.push_back(g);
   }
   for (const tinygltf::Skin& sk : m.skins) {

@@ -79,12 +79,31 @@ TEST(Gltf, BrokenFilesNameTheFile) {
       << R"("accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},)"
       << R"({"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],)"
       << R"("nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}]})";
-  for (const char* name : {"garbage.gltf", "empty.glb", "bad_index.gltf", "missing.gltf"}) {
+  // one triangle (0, 1, 2): its first vertex's x is NaN in the first file; the second is sound but
+  // its node is moved beyond the float range
+  auto triangle = [](const char* base64, const char* node) {
+    return std::string(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":42,"uri":"data:application/octet-stream;base64,)") +
+           base64 + R"("}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],)" +
+           R"("accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},)" +
+           R"({"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],)" +
+           R"("nodes":[)" + node + R"(],"scenes":[{"nodes":[0]}]})";
+  };
+  std::ofstream(dir / "nan_position.gltf") << triangle("AADAfwAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIA", R"({"mesh":0})");
+  std::ofstream(dir / "huge_translation.gltf")
+      << triangle("AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIA", R"({"mesh":0,"name":"far","translation":[1e39,0,0]})");
+  std::ofstream(dir / "sound.gltf") << triangle("AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIA", R"({"mesh":0})");
+  EXPECT_EQ(load_gltf(dir / "sound.gltf").meshes.at(0).tris.size(), 1u) << "the files below differ from it in one value";
+  const std::pair<const char*, const char*> cases[] = {
+      {"garbage.gltf", ""}, {"empty.glb", ""}, {"bad_index.gltf", ""}, {"missing.gltf", ""},
+      {"nan_position.gltf", "accessor 0 holds a non-finite float (element 0)"},
+      {"huge_translation.gltf", "node 'far' translation is 1e+39, beyond the float range"}};
+  for (const auto& [name, expected] : cases) {
     try {
       load_gltf(dir / name);
       ADD_FAILURE() << name << " was accepted";
     } catch (const ParseError& e) {
       EXPECT_NE(std::string(e.what()).find((dir / name).string()), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
     }
   }
   std::filesystem::remove_all(dir);
