@@ -68,18 +68,7 @@ ImageFolderReader::ImageFolderReader(const std::filesystem::path& folder, const 
   if (options.intrinsics) {
     intrinsics_ = options.intrinsics;
   } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
-    std::ifstream in(folder / "intrinsics.txt");
-    std::string line;
-    while (std::getline(in, line)) {
-      if (line.empty() || line[0] == '#') continue;
-      std::istringstream ss(line);
-      ar::PinholeIntrinsics k;
-      if (!(ss >> k.fx >> k.fy >> k.cx >> k.cy)) {
-        throw ParseError((folder / "intrinsics.txt").string(), 0, 0, "expected 'fx fy cx cy'");
-      }
-      intrinsics_ = k;
-      break;
-    }
+    intrinsics_ = read_intrinsics(folder / "intrinsics.txt");
   }
 }
 

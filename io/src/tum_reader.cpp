@@ -100,6 +100,37 @@ ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
   return ar::Trajectory(std::move(samples));
 }
 
+ar::PinholeIntrinsics read_intrinsics(const std::filesystem::path& path) {
+  std::ifstream in = open_text(path);
+  std::string line;
+  std::vector<std::string> w;
+  int n = 0;
+  while (w.empty() && std::getline(in, line)) {
+    ++n;
+    w = words(line);
+  }
+  if (w.size() != 4 && w.size() != 6) throw ParseError(path.string(), n, 0, "expected 'fx fy cx cy [width height]'");
+  auto value = [&](int i, const char* what, double lo, double hi) {
+    const double v = parse_number(w[i], path, n, what);
+    if (!(v >= lo && v <= hi)) {
+      std::ostringstream m;
+      m << what << " " << quote_token(w[i]) << " is not in " << lo << ".." << hi;
+      throw ParseError(path.string(), n, 0, m.str());
+    }
+    return v;
+  };
+  ar::PinholeIntrinsics k;
+  k.fx = value(0, "fx", 1e-6, 1e6);
+  k.fy = value(1, "fy", 1e-6, 1e6);
+  k.cx = value(2, "cx", -1e6, 1e6);
+  k.cy = value(3, "cy", -1e6, 1e6);
+  if (w.size() == 6) {
+    k.width = static_cast<int>(value(4, "the width", 1, 100000));
+    k.height = static_cast<int>(value(5, "the height", 1, 100000));
+  }
+  return k;
+}
+
 void write_tum_trajectory(const std::filesystem::path& path, const ar::Trajectory& trajectory) {
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   const std::filesystem::path tmp = path.string() + ".partial";
@@ -185,24 +216,7 @@ TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& opti
   if (options.intrinsics) {
     intrinsics_ = *options.intrinsics;
   } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
-    const std::filesystem::path p = folder / "intrinsics.txt";
-    std::ifstream in = open_text(p);
-    std::string line;
-    std::vector<std::string> w;
-    int n = 0;
-    while (w.empty() && std::getline(in, line)) {
-      ++n;
-      w = words(line);
-    }
-    if (w.size() != 4 && w.size() != 6) throw ParseError(p.string(), n, 0, "expected 'fx fy cx cy [width height]'");
-    intrinsics_.fx = parse_number(w[0], p, n, "fx");
-    intrinsics_.fy = parse_number(w[1], p, n, "fy");
-    intrinsics_.cx = parse_number(w[2], p, n, "cx");
-    intrinsics_.cy = parse_number(w[3], p, n, "cy");
-    if (w.size() == 6) {
-      intrinsics_.width = static_cast<int>(parse_number(w[4], p, n, "the width"));
-      intrinsics_.height = static_cast<int>(parse_number(w[5], p, n, "the height"));
-    }
+    intrinsics_ = read_intrinsics(folder / "intrinsics.txt");
   } else {
     intrinsics_ = freiburg_intrinsics(std::filesystem::absolute(folder).lexically_normal().string());
   }

@@ -90,6 +90,44 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
   std::filesystem::remove_all(dir);
 }
 
+/// intrinsics.txt (TUM and image folders): the first line that is not a comment, checked. Values
+/// that parse but make no camera (a focal length of 0 or 1e39, a principal point at 1e20, a size
+/// of 0 or 1e20, which was cast to int unchecked) are refused with the file, line and value named.
+TEST(Intrinsics, ValuesOutOfRangeNameFileLineAndValue) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_intrinsics";
+  std::filesystem::create_directories(dir);
+  const auto path = dir / "intrinsics.txt";
+  std::ofstream(path) << "# fx fy cx cy width height\n\n500 510 319.5 239.5 640 480\n";
+  const ar::PinholeIntrinsics k = read_intrinsics(path);
+  EXPECT_EQ(k.fx, 500.0);
+  EXPECT_EQ(k.fy, 510.0);
+  EXPECT_EQ(k.cx, 319.5);
+  EXPECT_EQ(k.cy, 239.5);
+  EXPECT_EQ(k.width, 640);
+  EXPECT_EQ(k.height, 480);
+  std::ofstream(path) << "500 510 319.5 239.5\n";
+  EXPECT_EQ(read_intrinsics(path).width, 0) << "no size given: the readers take the images'";
+  const std::pair<const char*, const char*> cases[] = {
+      {"0 510 319.5 239.5", ":1: fx \"0\" is not in 1e-06..1e+06"},
+      {"500 1e39 319.5 239.5", ":1: fy \"1e39\" is not in 1e-06..1e+06"},
+      {"# comment\n500 510 1e20 239.5", ":2: cx \"1e20\" is not in -1e+06..1e+06"},
+      {"500 510 319.5 239.5 0 480", ":1: the width \"0\" is not in 1..100000"},
+      {"500 510 319.5 239.5 640 1e20", ":1: the height \"1e20\" is not in 1..100000"},
+      {"500 510 319.5", ":1: expected 'fx fy cx cy [width height]'"},
+      {"500 510 nan 239.5", ":1: expected cx, got \"nan\""},
+  };
+  for (const auto& [text, expected] : cases) {
+    std::ofstream(path) << text << "\n";
+    try {
+      read_intrinsics(path);
+      ADD_FAILURE() << "accepted " << text;
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string() + expected), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
 /// Every reader over every broken input: a ParseError naming the file, never a crash.
 TEST(BrokenInputs, EveryReaderRefusesEveryBrokenInputWithTheFileNamed) {
   const std::filesystem::path root = std::filesystem::path(ARTRACE_SOURCE_DIR) / "tests/data/broken";

@@ -7,7 +7,8 @@
 //   io::ParseError naming the file when that frame is read;
 // - depth 0 and 65535 (saturated): no reading (0 in the frame);
 // - a timestamp list out of order, an unparsable line, a trajectory with a non-unit quaternion, a
-//   translation beyond +-1e6 m or out-of-order times: io::ParseError naming file and line, at open;
+//   translation beyond +-1e6 m or out-of-order times, intrinsics out of range (read_intrinsics):
+//   io::ParseError naming file and line, at open;
 // - colour frames without a depth frame within `max_dt_s`: skipped with a warning;
 // - no groundtruth.txt: frames have no pose; poses more than `max_pose_gap_s` from a trajectory
 //   sample on either side: that frame has no pose.
@@ -32,6 +33,12 @@ struct TimedFile {
 std::vector<TimedFile> read_tum_list(const std::filesystem::path& path);
 /// Reads a TUM trajectory ("timestamp tx ty tz qx qy qz qw"); ParseError naming file and line.
 ar::Trajectory read_tum_trajectory(const std::filesystem::path& path);
+
+/// An intrinsics.txt: 'fx fy cx cy [width height]' on its first line that is not blank or a '#'
+/// comment. Focal lengths above 0 and at most 1e6 pixels, the principal point within +-1e6, the
+/// size (when given) 1 to 100000 pixels; io::ParseError naming the file and line otherwise. The
+/// size stays 0 when not given (the readers take it from the images).
+ar::PinholeIntrinsics read_intrinsics(const std::filesystem::path& path);
 /// Writes one (write-then-rename).
 void write_tum_trajectory(const std::filesystem::path& path, const ar::Trajectory& trajectory);
 
