@@ -8,6 +8,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace artrace::io {
@@ -147,15 +148,19 @@ class Parser {
     return t;
   }
 
-  void expect_word(Lexer& lex, std::string_view word) {
+  Token expect_word(Lexer& lex, std::string_view word) {
     const Token t = expect_token(lex, std::string(word).c_str());
     if (t.text != word) {
       fail(lex, t, "expected '" + std::string(word) + "', got " + quote_token(t.text));
     }
+    return t;
   }
 
-  double number(Lexer& lex, const char* what) {
+  /// A number; finite and within the float range (the scene is kept in floats). `where`, when
+  /// given, receives its token.
+  double number(Lexer& lex, const char* what, Token* where = nullptr) {
     const Token t = expect_token(lex, what);
+    if (where) *where = t;
     std::string_view s = t.text;
     if (!s.empty() && s[0] == '+') s.remove_prefix(1);
     double v = 0.0;
@@ -164,6 +169,9 @@ class Parser {
       fail(lex, t, std::string("expected ") + what + ", got " + quote_token(t.text));
     }
     if (!std::isfinite(v)) fail(lex, t, std::string("expected ") + what + ", got the non-finite " + quote_token(t.text));
+    if (std::fabs(v) > static_cast<double>(std::numeric_limits<float>::max())) {
+      fail(lex, t, std::string("expected ") + what + ", got " + quote_token(t.text) + ", beyond the float range");
+    }
     return v;
   }
 
@@ -289,10 +297,17 @@ class Parser {
     v.from = glm::vec3(vec3(lex, "a number after 'from'"));
     expect_word(lex, "at");
     v.at = glm::vec3(vec3(lex, "a number after 'at'"));
-    expect_word(lex, "up");
+    const Token up = expect_word(lex, "up");
     v.up = glm::vec3(vec3(lex, "a number after 'up'"));
+    if (!(glm::length(v.at - v.from) > 0.0f) || !(glm::length(glm::cross(v.at - v.from, v.up)) > 0.0f)) {
+      fail(lex, up, "the view needs 'at' apart from 'from' and 'up' not parallel to the view direction");
+    }
     expect_word(lex, "angle");
-    v.fov_y_deg = static_cast<float>(number(lex, "the view angle in degrees"));
+    Token angle;
+    v.fov_y_deg = static_cast<float>(number(lex, "the view angle in degrees", &angle));
+    if (!(v.fov_y_deg > 0.0f && v.fov_y_deg < 180.0f)) {
+      fail(lex, angle, "the view angle " + quote_token(angle.text) + " is not between 0 and 180 degrees");
+    }
     expect_word(lex, "hither");
     v.hither = static_cast<float>(number(lex, "the hither distance"));
     expect_word(lex, "resolution");

@@ -198,6 +198,14 @@ TEST_F(AffFiles, MalformedInputNamesFileLineAndProblem) {
       {"unclosed", "xs 1 1 1 0 0 1 0 0 0 0\n{\np 3\n0 0 0\n1 0 0\n0 1 0\n", 2, "'{' is never closed"},
       {"stray_brace", "}\n", 1, "'}' without a matching '{'"},
       {"view_keyword", "v\nfrom 0 0 0\nto 1 1 1\n", 3, "expected 'at'"},
+      // views that make no camera (before, the error came when rendering, without the file)
+      {"view_angle", "v\nfrom 0 0 3\nat 0 0 0\nup 0 1 0\nangle 180\nhither 0.01\nresolution 8 8\n", 5,
+       "the view angle \"180\" is not between 0 and 180 degrees"},
+      {"view_up", "v\nfrom 0 0 3\nat 0 0 0\nup 0 0 2\nangle 45\nhither 0.01\nresolution 8 8\n", 4,
+       "'up' not parallel to the view direction"},
+      {"view_at", "v\nfrom 1 2 3\nat 1 2 3\nup 0 1 0\nangle 45\nhither 0.01\nresolution 8 8\n", 4,
+       "the view needs 'at' apart from 'from'"},
+      {"beyond_float", "p 3\n0 0 0\n1e39 0 0\n0 1 0\n", 3, "got \"1e39\", beyond the float range"},
       {"mesh_block", "m\nvertices 1\n0 0 0\nfaces 1\n", 4, "expected 'triangles' in mesh"},
       {"track_keyword", "k a\n{\nspin 1\n}\n", 3, "expected 'transl', 'rot', 'scale' or '}'"},
       // a corrupt file's token: binary bytes escaped, and no more than 40 characters of it quoted
