@@ -8,8 +8,6 @@
 #include <opencv2/videoio.hpp>
 
 #include <algorithm>
-#include <fstream>
-#include <sstream>
 
 namespace artrace::io {
 namespace {
