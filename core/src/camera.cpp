@@ -8,7 +8,7 @@ namespace {
 
 void set_fov(Camera& c, float fov_y_deg, int width, int height) {
   if (width <= 0 || height <= 0) throw std::invalid_argument("camera: image size must be positive");
-  if (!(fov_y_deg > 0.0f && fov_y_deg < 180.0f)) {
+  if (!Camera::valid_fov(fov_y_deg)) {
     throw std::invalid_argument("camera: field of view must lie in (0, 180) degrees");
   }
   c.width = width;
@@ -23,11 +23,11 @@ void set_fov(Camera& c, float fov_y_deg, int width, int height) {
 
 Camera Camera::look_at(const glm::vec3& from, const glm::vec3& at, const glm::vec3& up, float fov_y_deg,
                        int width, int height) {
-  const glm::vec3 forward = at - from;
-  const glm::vec3 right = glm::cross(forward, up);
-  if (!(glm::length(forward) > 0.0f) || !(glm::length(right) > 0.0f)) {
+  if (!valid_view(from, at, up)) {
     throw std::invalid_argument("camera: 'at' must differ from 'from' and 'up' must not be parallel to the view");
   }
+  const glm::vec3 forward = at - from;
+  const glm::vec3 right = glm::cross(forward, up);
   Camera c;
   set_fov(c, fov_y_deg, width, height);
   const glm::vec3 z = glm::normalize(forward);

@@ -299,13 +299,13 @@ class Parser {
     v.at = glm::vec3(vec3(lex, "a number after 'at'"));
     const Token up = expect_word(lex, "up");
     v.up = glm::vec3(vec3(lex, "a number after 'up'"));
-    if (!(glm::length(v.at - v.from) > 0.0f) || !(glm::length(glm::cross(v.at - v.from, v.up)) > 0.0f)) {
+    if (!core::Camera::valid_view(v.from, v.at, v.up)) {
       fail(lex, up, "the view needs 'at' apart from 'from' and 'up' not parallel to the view direction");
     }
     expect_word(lex, "angle");
     Token angle;
     v.fov_y_deg = static_cast<float>(number(lex, "the view angle in degrees", &angle));
-    if (!(v.fov_y_deg > 0.0f && v.fov_y_deg < 180.0f)) {
+    if (!core::Camera::valid_fov(v.fov_y_deg)) {
       fail(lex, angle, "the view angle " + quote_token(angle.text) + " is not between 0 and 180 degrees");
     }
     expect_word(lex, "hither");

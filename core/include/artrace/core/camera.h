@@ -17,8 +17,17 @@ struct Camera {
   glm::vec3 position{0.0f};
   glm::mat3 rotation{1.0f};    ///< world-from-camera; columns are the camera's x, y, z axes
 
+  /// Whether look_at can make a camera of these: `at` apart from `from`, `up` not parallel to the
+  /// view direction. (Readers check their files with it, to name the file and line.)
+  static bool valid_view(const glm::vec3& from, const glm::vec3& at, const glm::vec3& up) {
+    return glm::length(at - from) > 0.0f && glm::length(glm::cross(at - from, up)) > 0.0f;
+  }
+  /// Whether a full vertical field of view is usable: strictly between 0 and 180 degrees.
+  static bool valid_fov(float fov_y_deg) { return fov_y_deg > 0.0f && fov_y_deg < 180.0f; }
+
   /// A camera at `from` looking at `at`, `up` pointing up in the picture, `fov_y_deg` the full
-  /// vertical field of view. Throws std::invalid_argument on a degenerate view.
+  /// vertical field of view. Throws std::invalid_argument on a degenerate view (valid_view,
+  /// valid_fov).
   static Camera look_at(const glm::vec3& from, const glm::vec3& at, const glm::vec3& up, float fov_y_deg,
                         int width, int height);
   /// A camera with pose (position, world-from-camera rotation of a camera that looks down -z with
