@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -41,6 +43,62 @@ inline glm::vec3 random_direction(std::mt19937& rng) {
     const glm::vec3 d(n(rng), n(rng), n(rng));
     if (glm::length(d) > 1e-3f) return glm::normalize(d);
   }
+}
+
+/// Ray/triangle in double precision (Moller & Trumbore, "Fast, minimum storage ray-triangle
+/// intersection", JGT 1997): an oracle independent of the float watertight test the kernels use.
+/// `slack` > 0 widens the triangle by that much in barycentric terms, < 0 narrows it, so that a
+/// caller can tell a clear hit from one within rounding of an edge. Accepts t in (tmin, tmax].
+inline bool hit_exact(const Ray& r, const Triangle& tri, double slack, double& t) {
+  const glm::dvec3 o(r.org), d(r.dir), v0(tri.v0), v1(tri.v1), v2(tri.v2);
+  const glm::dvec3 e1 = v1 - v0, e2 = v2 - v0, p = glm::cross(d, e2);
+  const double det = glm::dot(e1, p);
+  if (det == 0.0) return false;
+  const double inv = 1.0 / det;
+  const glm::dvec3 s = o - v0;
+  const double u = glm::dot(s, p) * inv;
+  const glm::dvec3 q = glm::cross(s, e1);
+  const double v = glm::dot(d, q) * inv;
+  if (u < -slack || v < -slack || u + v > 1.0 + slack) return false;
+  t = glm::dot(e2, q) * inv;
+  return t > r.tmin && t <= r.tmax;
+}
+
+struct ExactHit {
+  uint32_t prim = core::kInvalidId;
+  double t = std::numeric_limits<double>::infinity();
+  bool valid() const { return prim != core::kInvalidId; }
+};
+
+inline ExactHit intersect_exact(const Ray& r, const std::vector<Triangle>& tris, double slack) {
+  ExactHit best;
+  for (size_t i = 0; i < tris.size(); ++i) {
+    double t;
+    if (hit_exact(r, tris[i], slack, t) && t < best.t) best = {static_cast<uint32_t>(i), t};
+  }
+  return best;
+}
+
+/// Whether a closest hit `got` (kd-tree, BVH or brute force in float) agrees with the double
+/// oracle: no triangle is clearly hit (inside by 1e-6) closer than it, and when it names a
+/// triangle, that triangle is hit, within 1e-6 of its edges, at its distance (1e-5 relative).
+/// Rays within rounding of an edge may take either neighbour; nothing else may differ.
+inline ::testing::AssertionResult agrees_with_exact(const Ray& r, const std::vector<Triangle>& tris, const core::Hit& got) {
+  const ExactHit clear = intersect_exact(r, tris, -1e-6);
+  if (!got.valid()) {
+    if (!clear.valid()) return ::testing::AssertionSuccess();
+    return ::testing::AssertionFailure() << "missed triangle " << clear.prim << " at t " << clear.t;
+  }
+  double t;
+  if (got.prim >= tris.size() || !hit_exact(r, tris[got.prim], 1e-6, t)) {
+    return ::testing::AssertionFailure() << "triangle " << got.prim << " is not hit (double precision)";
+  }
+  const double tol = 1e-5 * std::max(1.0, std::fabs(t));
+  if (std::fabs(t - got.t) > tol) return ::testing::AssertionFailure() << "t " << got.t << ", double precision " << t;
+  if (clear.valid() && clear.t < got.t - tol) {
+    return ::testing::AssertionFailure() << "triangle " << clear.prim << " is hit closer, at t " << clear.t << " (got " << got.t << ")";
+  }
+  return ::testing::AssertionSuccess();
 }
 
 /// A soup of `count` random triangles of size about `size` in the cube [0, 10]^3.

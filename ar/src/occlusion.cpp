@@ -137,41 +137,111 @@ std::vector<uint8_t> exact_visibility(const DepthImage& exact, const std::vector
   return m;
 }
 
-MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth, int w, int h) {
+namespace {
+
+using Pixels = std::vector<std::pair<int, int>>;
+
+/// Visible pixels of `m` with a 4-neighbour (inside the image) for which `other_side` holds.
+template <class Pred>
+Pixels boundary_pixels(const std::vector<uint8_t>& m, int w, int h, const Pred& other_side) {
+  Pixels out;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      if (!m[static_cast<size_t>(y) * w + x]) continue;
+      const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+      for (int k = 0; k < 4; ++k) {
+        if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
+        if (other_side(static_cast<size_t>(ny[k]) * w + nx[k])) {
+          out.push_back({x, y});
+          break;
+        }
+      }
+    }
+  }
+  return out;
+}
+
+/// Sum over `from` of the distance to the nearest pixel of `to` (`none` each when `to` is empty).
+double distance_sum(const Pixels& from, const Pixels& to, double none) {
+  double sum = 0.0;
+  for (const auto& [x, y] : from) {
+    double best = none;
+    for (const auto& [tx, ty] : to) best = std::min(best, std::hypot(double(x - tx), double(y - ty)));
+    sum += best;
+  }
+  return sum;
+}
+
+std::vector<uint8_t> visible(const std::vector<float>& alpha) {
+  std::vector<uint8_t> m(alpha.size());
+  for (size_t i = 0; i < alpha.size(); ++i) m[i] = alpha[i] >= 0.5f;
+  return m;
+}
+
+/// O(m): visible pixels next to a covered, hidden one.
+Pixels occlusion_boundary(const std::vector<uint8_t>& m, const std::vector<uint8_t>& covered, int w, int h) {
+  return boundary_pixels(m, w, h, [&](size_t j) { return covered[j] && !m[j]; });
+}
+
+}  // namespace
+
+std::vector<uint8_t> covered_pixels(const std::vector<float>& zv) {
+  std::vector<uint8_t> c(zv.size());
+  for (size_t i = 0; i < zv.size(); ++i) c[i] = std::isfinite(zv[i]);
+  return c;
+}
+
+MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth, const std::vector<uint8_t>& covered,
+                     int w, int h) {
   MaskScore s;
+  const std::vector<uint8_t> est = visible(alpha);
   size_t inter = 0, uni = 0;
-  std::vector<uint8_t> est(alpha.size());
-  for (size_t i = 0; i < alpha.size(); ++i) {
-    est[i] = alpha[i] >= 0.5f;
+  for (size_t i = 0; i < est.size(); ++i) {
     inter += est[i] && truth[i];
     uni += est[i] || truth[i];
     s.false_visible += est[i] && !truth[i];
     s.false_hidden += !est[i] && truth[i];
   }
   s.iou = uni ? static_cast<double>(inter) / uni : 1.0;
-  // boundary: pixels with a 4-neighbour of the other value; distance to the nearest truth boundary
-  auto boundary = [&](const std::vector<uint8_t>& m) {
-    std::vector<std::pair<int, int>> b;
+  const double none = std::hypot(double(w), double(h));
+  const Pixels o_truth = occlusion_boundary(truth, covered, w, h), o_est = occlusion_boundary(est, covered, w, h);
+  const Pixels f_truth = boundary_pixels(truth, w, h, [&](size_t j) { return !truth[j]; });
+  const Pixels f_est = boundary_pixels(est, w, h, [&](size_t j) { return !est[j]; });
+  s.truth_boundary_pixels = static_cast<int>(o_truth.size());
+  s.boundary_pixels = static_cast<int>(o_truth.size() + o_est.size());
+  if (s.boundary_pixels > 0) {
+    s.boundary_px = (distance_sum(o_truth, f_est, none) + distance_sum(o_est, f_truth, none)) / s.boundary_pixels;
+  }
+  // the earlier figure: pixels whose left or upper neighbour differs, estimate to truth only
+  auto any_boundary = [&](const std::vector<uint8_t>& m) {
+    Pixels b;
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
         const uint8_t v = m[static_cast<size_t>(y) * w + x];
-        const bool edge = (x > 0 && m[static_cast<size_t>(y) * w + x - 1] != v) || (y > 0 && m[static_cast<size_t>(y - 1) * w + x] != v);
-        if (edge) b.push_back({x, y});
+        if ((x > 0 && m[static_cast<size_t>(y) * w + x - 1] != v) || (y > 0 && m[static_cast<size_t>(y - 1) * w + x] != v)) b.push_back({x, y});
       }
     }
     return b;
   };
-  const auto be = boundary(est), bt = boundary(truth);
-  if (!be.empty() && !bt.empty()) {
-    double sum = 0.0;
-    for (const auto& [x, y] : be) {
-      double best = std::numeric_limits<double>::infinity();
-      for (const auto& [tx, ty] : bt) best = std::min(best, std::hypot(double(x - tx), double(y - ty)));
-      sum += best;
-    }
-    s.boundary_px = sum / be.size();
-  }
+  const Pixels be = any_boundary(est), bt = any_boundary(truth);
+  if (!be.empty() && !bt.empty()) s.outline_boundary_px = distance_sum(be, bt, none) / be.size();
   return s;
+}
+
+std::optional<double> occlusion_jitter(const std::vector<float>& previous_alpha, const std::vector<float>& alpha,
+                                       const std::vector<uint8_t>& previous_truth, const std::vector<uint8_t>& truth,
+                                       const std::vector<uint8_t>& previous_covered, const std::vector<uint8_t>& covered,
+                                       int w, int h) {
+  const size_t edge = occlusion_boundary(truth, covered, w, h).size();
+  if (edge == 0) return std::nullopt;
+  size_t unexplained = 0;
+  for (size_t i = 0; i < alpha.size(); ++i) {
+    if (!covered[i] || !previous_covered[i]) continue;
+    const bool est_changed = (alpha[i] >= 0.5f) != (previous_alpha[i] >= 0.5f);
+    const bool truth_changed = (truth[i] != 0) != (previous_truth[i] != 0);
+    unexplained += est_changed != truth_changed;
+  }
+  return static_cast<double>(unexplained) / static_cast<double>(edge);
 }
 
 }  // namespace artrace::ar

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -101,7 +102,10 @@ TEST(Occlusion, HolesInTheDepthMap) {
   for (int y = 8; y < 40; ++y) {
     for (int x = 8; x < 56; ++x) {
       const bool inside_large = x >= 30 && x < 54 && y >= 10 && y < 30;
-      const bool deep_inside = x >= 40 && x < 44 && y >= 18 && y < 22;
+      // hole filling reaches fill_radius x fill_passes = 8 pixels into a hole it may fill; this
+      // one is too large to fill at all, so everything but the refinement's blend at its rim
+      // (guide_radius = 2 pixels) shows the virtual surface
+      const bool deep_inside = x >= 33 && x < 51 && y >= 13 && y < 27;
       if (!inside_large) {
         ASSERT_LT(alpha[y * kW + x], 0.5f) << "hole punched at " << x << "," << y;
       }
@@ -124,7 +128,7 @@ TEST(Occlusion, GaussianNoiseNeitherShiftsNorFlickers) {
     std::normal_distribution<float> n(0.0f, 0.0012f + 0.0019f * 1.6f * 1.6f);
     for (float& d : noisy.depth_m) d += n(rng);
     alphas.push_back(occlusion_alpha(noisy, uniform(128, 128, 128), zv));
-    const MaskScore s = score_mask(alphas.back(), truth, kW, kH);
+    const MaskScore s = score_mask(alphas.back(), truth, covered_pixels(zv), kW, kH);
     EXPECT_GE(s.iou, 0.98) << "seed " << seed;
     EXPECT_LE(s.boundary_px, 1.0) << "seed " << seed;
   }
@@ -161,6 +165,130 @@ TEST(Occlusion, OnePixelColourDepthOffsetIsCorrected) {
   for (size_t i = 0; i < truth.size(); ++i) wrong_plain += (a0[i] >= 0.5f) != (truth[i] != 0);
   EXPECT_EQ(wrong_plain, kH) << "without refinement one column is wrong";
   expect_equal_masks(occlusion_alpha(depth, color, zv), truth, "refined");
+}
+
+
+/// Masks for the metric tests: a virtual surface covering columns [8, 56) of every row.
+std::vector<uint8_t> columns(int x0, int x1) {
+  std::vector<uint8_t> m(kW * kH, 0);
+  for (int y = 0; y < kH; ++y)
+    for (int x = x0; x < x1; ++x) m[y * kW + x] = 1;
+  return m;
+}
+
+std::vector<float> as_alpha(const std::vector<uint8_t>& m) { return std::vector<float>(m.begin(), m.end()); }
+
+TEST(OcclusionMetric, ShiftedEdgeCostsItsShiftBothWays) {
+  const auto covered = columns(8, 56);
+  const auto truth = columns(8, 32);  // real geometry hides x >= 32
+  const MaskScore s = score_mask(as_alpha(columns(8, 30)), truth, covered, kW, kH);
+  // O(truth) is column 31, O(estimate) column 29; each is 2 pixels from the other's boundary
+  EXPECT_EQ(s.truth_boundary_pixels, kH);
+  EXPECT_EQ(s.boundary_pixels, 2 * kH);
+  EXPECT_DOUBLE_EQ(s.boundary_px, 2.0);
+  EXPECT_DOUBLE_EQ(s.iou, 22.0 / 24.0);
+  EXPECT_EQ(s.false_hidden, 2 * kH);
+  EXPECT_EQ(s.false_visible, 0);
+}
+
+TEST(OcclusionMetric, ObjectOutlineIsNotScored) {
+  const auto covered = columns(8, 56);
+  const auto truth = columns(8, 32);
+  const MaskScore s = score_mask(as_alpha(truth), truth, covered, kW, kH);
+  EXPECT_DOUBLE_EQ(s.boundary_px, 0.0);
+  EXPECT_EQ(s.boundary_pixels, 2 * kH) << "both sides' occlusion boundary: column 31";
+  EXPECT_DOUBLE_EQ(s.iou, 1.0);
+  // no occlusion at all: only an outline, nothing to measure
+  const MaskScore none = score_mask(as_alpha(covered), covered, covered, kW, kH);
+  EXPECT_EQ(none.boundary_pixels, 0);
+  EXPECT_DOUBLE_EQ(none.boundary_px, 0.0);
+}
+
+TEST(OcclusionMetric, MissedEdgeCostsTheDistanceToTheBoundaryDrawn) {
+  const auto covered = columns(8, 56);
+  const auto truth = columns(8, 32);
+  // the estimate shows the whole object: its only boundary is the outline, columns 8 and 55;
+  // column 31 is 23 pixels from column 8 (24 from column 55); the estimate has no occlusion boundary
+  const MaskScore s = score_mask(as_alpha(covered), truth, covered, kW, kH);
+  EXPECT_EQ(s.boundary_pixels, kH);
+  EXPECT_DOUBLE_EQ(s.boundary_px, 23.0);
+  // the earlier figure marks pixels whose left or upper neighbour differs, estimate to truth only:
+  // the estimate's columns 8 and 56 against the truth's 8 and 32, (0 + 24) / 2
+  EXPECT_DOUBLE_EQ(s.outline_boundary_px, 12.0);
+}
+
+TEST(OcclusionMetric, EmptyMasks) {
+  const std::vector<uint8_t> nothing(kW * kH, 0);
+  const MaskScore s = score_mask(as_alpha(nothing), nothing, nothing, kW, kH);
+  EXPECT_DOUBLE_EQ(s.iou, 1.0);
+  EXPECT_EQ(s.boundary_pixels, 0);
+  EXPECT_DOUBLE_EQ(s.boundary_px, 0.0);
+  // an estimate that shows nothing of a partly hidden object: IoU 0, and each truth boundary pixel
+  // costs the image diagonal (there is no boundary to measure to): hypot(64, 48) = 80
+  const auto covered = columns(8, 56);
+  const MaskScore miss = score_mask(as_alpha(nothing), columns(8, 32), covered, kW, kH);
+  EXPECT_DOUBLE_EQ(miss.iou, 0.0);
+  EXPECT_DOUBLE_EQ(miss.boundary_px, 80.0);
+}
+
+TEST(OcclusionMetric, JitterIsPerPixelOfTrueOcclusionBoundary) {
+  const auto covered = columns(8, 56);
+  const auto truth = columns(8, 32);
+  // the estimate gains column 32 in the second frame while the truth stays: 48 unexplained
+  // changes over 48 boundary pixels
+  const auto j = occlusion_jitter(as_alpha(truth), as_alpha(columns(8, 33)), truth, truth, covered, covered, kW, kH);
+  ASSERT_TRUE(j.has_value());
+  EXPECT_DOUBLE_EQ(*j, 1.0);
+  // the truth moves by a column and the estimate follows: nothing unexplained
+  const auto follow = occlusion_jitter(as_alpha(truth), as_alpha(columns(8, 33)), truth, columns(8, 33), covered, covered, kW, kH);
+  EXPECT_DOUBLE_EQ(*follow, 0.0);
+  // changes at the outline (the object moves) are not jitter
+  const auto moved = occlusion_jitter(as_alpha(columns(8, 32)), as_alpha(columns(10, 32)), columns(8, 32), columns(10, 32),
+                                      covered, columns(10, 56), kW, kH);
+  EXPECT_DOUBLE_EQ(*moved, 0.0);
+  // no occlusion boundary in the truth: nothing to divide by
+  EXPECT_FALSE(occlusion_jitter(as_alpha(covered), as_alpha(covered), covered, covered, covered, covered, kW, kH).has_value());
+}
+
+/// The soft band follows the sensor's noise, which grows with distance squared (Nguyen et al.):
+/// sigma(z) = 1.2 mm + 1.9 mm (z - 0.4)^2, band = 3 sigma. A virtual surface 1 cm in front of a real
+/// plane is opaque at 1 m (band 5.65 mm) and only a little more visible than hidden at 4 m.
+TEST(Occlusion, SoftBandWidensWithDistance) {
+  OcclusionOptions o;
+  o.refine = false;
+  for (const double z : {1.0, 2.5, 4.0}) {
+    const DepthImage real = plane(static_cast<float>(z));
+    std::vector<float> zv(kW * kH, static_cast<float>(z - 0.01));
+    const auto alpha = occlusion_alpha(real, uniform(128, 128, 128), zv, o);
+    const double sigma = 0.0012 + 0.0019 * (z - 0.4) * (z - 0.4);
+    const double band = std::max(0.005, 3.0 * sigma);
+    const double expected = std::clamp(0.5 + 0.01 / (2.0 * band), 0.0, 1.0);
+    EXPECT_NEAR(alpha[20 * kW + 20], expected, 2e-4) << "z = " << z;
+  }
+  // by hand at 4 m: sigma = 1.2 + 1.9 x 12.96 = 25.824 mm, band 77.47 mm, alpha = 0.5 + 10 / 154.94
+  const DepthImage far = plane(4.0f);
+  const auto a = occlusion_alpha(far, uniform(128, 128, 128), std::vector<float>(kW * kH, 3.99f), o);
+  EXPECT_NEAR(a[20 * kW + 20], 0.5645, 5e-4);
+}
+
+/// Holes at a silhouette are the sensor's shadow on the background: they are filled from the far
+/// side. A near occluder (1 m) left of x = 32, a far wall (3 m) right of x = 34, no reading at
+/// x = 32 and 33: a virtual surface at 2 m shows through both hole columns. (The pixel at x = 32
+/// has 10 near and 5 far readings in its 5x5 window: a median would fill it near.)
+TEST(Occlusion, HolesAtASilhouetteAreFilledFromTheFarSide) {
+  DepthImage real = plane(3.0f);
+  for (int y = 0; y < kH; ++y) {
+    for (int x = 0; x < 32; ++x) real.depth_m[y * kW + x] = 1.0f;
+    real.depth_m[y * kW + 32] = real.depth_m[y * kW + 33] = 0.0f;
+  }
+  OcclusionOptions o;
+  o.refine = false;
+  const auto alpha = occlusion_alpha(real, uniform(128, 128, 128), std::vector<float>(kW * kH, 2.0f), o);
+  for (int y = 2; y < kH - 2; ++y) {
+    EXPECT_EQ(alpha[y * kW + 31], 0.0f) << "the occluder at row " << y;
+    EXPECT_EQ(alpha[y * kW + 32], 1.0f) << "the hole next to the occluder, row " << y;
+    EXPECT_EQ(alpha[y * kW + 33], 1.0f) << "the hole next to the wall, row " << y;
+  }
 }
 
 }  // namespace

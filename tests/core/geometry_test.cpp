@@ -1,6 +1,8 @@
 #include "artrace/core/geometry.h"
 #include "../test_util.h"
 
+#include <cmath>
+
 namespace artrace::core {
 namespace {
 
@@ -55,6 +57,74 @@ TEST(Triangle, RaysThroughVerticesAndEdgesOfClosedMeshHit) {
     }
     EXPECT_EQ(misses, 0) << "of " << rays << " rays from " << centre.x;
   }
+}
+
+/// Rays exactly through shared edges and vertices, where the edge functions come out exactly zero
+/// in float: a closed cube of integer coordinates, 4 x 4 unit squares a face, two triangles each,
+/// and rays from integer points inside it with directions of small integers (the shear factors
+/// d_x / d_z are exact) aimed at every vertex and edge midpoint. Each must hit, at the analytic
+/// distance to the target.
+TEST(Triangle, RaysExactlyThroughGridEdgesAndVerticesHit) {
+  std::vector<Triangle> cube;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (const float side : {0.0f, 4.0f}) {
+      for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) {
+          auto p = [&](int a, int b) {
+            glm::vec3 v;
+            v[axis] = side;
+            v[(axis + 1) % 3] = static_cast<float>(a);
+            v[(axis + 2) % 3] = static_cast<float>(b);
+            return v;
+          };
+          // alternate the diagonal so that both orientations of shared edges occur
+          if ((i + j) % 2) {
+            cube.push_back({p(i, j), p(i + 1, j), p(i + 1, j + 1)});
+            cube.push_back({p(i, j), p(i + 1, j + 1), p(i, j + 1)});
+          } else {
+            cube.push_back({p(i, j), p(i + 1, j), p(i, j + 1)});
+            cube.push_back({p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)});
+          }
+        }
+      }
+    }
+  }
+  int rays = 0, misses = 0, wrong_t = 0;
+  for (const glm::vec3 origin : {glm::vec3(2, 2, 2), glm::vec3(1, 2, 3), glm::vec3(2, 1, 2)}) {
+    for (const Triangle& t : cube) {
+      for (const glm::vec3 target : {t.v0, t.v1, t.v2, 0.5f * (t.v0 + t.v1), 0.5f * (t.v1 + t.v2), 0.5f * (t.v2 + t.v0)}) {
+        const glm::vec3 d = target - origin;
+        ++rays;
+        const Hit h = intersect_brute_force(Ray{origin, d}, cube);
+        if (!h.valid()) {
+          if (++misses <= 3) ADD_FAILURE() << "miss from " << origin.x << "," << origin.y << "," << origin.z << " to " << target.x << "," << target.y << "," << target.z;
+        } else if (std::fabs(h.t - 1.0f) > 1e-6f) {
+          ++wrong_t;  // the target lies on the surface at t = 1
+        }
+      }
+    }
+  }
+  EXPECT_EQ(misses, 0) << "of " << rays;
+  EXPECT_EQ(wrong_t, 0) << "of " << rays;
+}
+
+/// A ray that passes 2^-24 beside a shared edge, where the float edge functions round to exactly
+/// zero for both triangles: the double-precision recomputation must give it to the triangle it
+/// really crosses (prim 1), not by the tie rule to prim 0. Worked out by hand: the edge b-c with
+/// b = (1, 1 + 2^-12), c = (-1 - 2^-12, -1 - 2^-11); the edge function at the origin is
+/// c.x b.y - c.y b.x = -(1 + 2^-12)^2 + (1 + 2^-11) = -2^-24, but (1 + 2^-12)^2 rounds to 1 + 2^-11.
+TEST(Triangle, RayBesideASharedEdgeTakesTheTriangleItCrosses) {
+  const float e12 = std::ldexp(1.0f, -12), e11 = std::ldexp(1.0f, -11);
+  ASSERT_EQ((1.0f + e12) * (1.0f + e12), 1.0f + e11) << "the float product must round as assumed";
+  const glm::vec3 a(-1, 1, 0), b(1, 1 + e12, 0), c(-1 - e12, -1 - e11, 0), d(1, -1, 0);
+  const std::vector<Triangle> pair{{a, b, c}, {d, c, b}};
+  const Ray r{{0, 0, -1}, {0, 0, 1}};
+  const Hit h = intersect_brute_force(r, pair);
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.prim, 1u);
+  EXPECT_EQ(h.t, 1.0f);
+  const test::ExactHit exact = test::intersect_exact(r, pair, 0.0);
+  EXPECT_EQ(exact.prim, 1u) << "the double-precision oracle agrees";
 }
 
 TEST(TriangleMesh, FlattenChecksIndices) {

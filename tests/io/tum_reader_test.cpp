@@ -24,6 +24,17 @@ TEST(Tum, AssociationPairsNearestUniqueWithinTolerance) {
   EXPECT_EQ(one[0].first, 1u);
 }
 
+/// The pairing window is max_dt_s on both sides of a colour frame, no more: a depth frame 19 ms
+/// before or after pairs, one 21 ms (or 25, 40 ms) before or after does not.
+TEST(Tum, PairingWindowHoldsOnBothSides) {
+  for (const double side : {-1.0, 1.0}) {
+    for (const double dt : {0.019, 0.021, 0.025, 0.040}) {
+      const auto pairs = associate({{10.0, "c"}}, {{10.0 + side * dt, "d"}}, 0.02);
+      EXPECT_EQ(pairs.size(), dt < 0.02 ? 1u : 0u) << "depth " << side * dt * 1000 << " ms from colour";
+    }
+  }
+}
+
 TEST(Tum, TrajectoryInterpolatesBetweenSamples) {
   ar::PoseSample a, b;
   a.time_s = 10.0;

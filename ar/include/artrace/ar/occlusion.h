@@ -16,6 +16,7 @@
 
 #include "artrace/ar/sensor_frame.h"
 
+#include <optional>
 #include <vector>
 
 namespace artrace::ar {
@@ -46,12 +47,38 @@ std::vector<float> occlusion_alpha(const DepthImage& sensor_depth, const ColorIm
 /// The hard ground-truth mask from exact depth: 1 where the virtual surface is in front.
 std::vector<uint8_t> exact_visibility(const DepthImage& exact_depth, const std::vector<float>& virtual_depth_m);
 
-/// Agreement of a soft mask (thresholded at 0.5) with a hard one.
+/// Agreement of a soft mask (thresholded at 0.5) with a hard one, measured where occlusion can be
+/// wrong. `covered` marks the pixels a virtual surface covers (finite virtual depth): a change of
+/// the mask between a covered and an uncovered pixel is the object's outline, right by construction,
+/// so it is not scored.
+///   - occlusion boundary O(m): visible pixels of m with a 4-neighbour that is covered but hidden;
+///   - full boundary F(m): visible pixels of m with a 4-neighbour that is not visible;
+///   - boundary_px: each pixel of O(truth) is measured to the nearest pixel of F(estimate), each of
+///     O(estimate) to F(truth), and the distances averaged over both sets (symmetric: a missed
+///     occlusion costs its distance to the boundary the estimate does draw, a false one likewise).
+///     Where the other side has no boundary at all the distance is the image diagonal.
 struct MaskScore {
-  double iou = 0.0;
-  double boundary_px = 0.0;  ///< mean distance from the estimate's boundary pixels to the truth's
+  double iou = 1.0;             ///< of the visible sets; 1 when both are empty
+  double boundary_px = 0.0;     ///< symmetric mean distance on the occlusion boundary (0 when there is none)
+  int boundary_pixels = 0;      ///< |O(truth)| + |O(estimate)|: how many distances boundary_px averages
+  int truth_boundary_pixels = 0;  ///< |O(truth)|
+  /// The one-sided figure this metric replaces: every boundary pixel of the estimate, the object's
+  /// outline included, to the truth's nearest one. Kept to compare with earlier reports.
+  double outline_boundary_px = 0.0;
   int false_visible = 0, false_hidden = 0;
 };
-MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth, int width, int height);
+MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth, const std::vector<uint8_t>& covered,
+                     int width, int height);
+
+/// Flicker of the estimate between two frames that the truth does not explain: covered pixels (in
+/// both frames) where the estimate changed and the truth did not, or the reverse, per pixel of the
+/// current truth's occlusion boundary. Empty when the truth has no occlusion boundary.
+std::optional<double> occlusion_jitter(const std::vector<float>& previous_alpha, const std::vector<float>& alpha,
+                                       const std::vector<uint8_t>& previous_truth, const std::vector<uint8_t>& truth,
+                                       const std::vector<uint8_t>& previous_covered, const std::vector<uint8_t>& covered,
+                                       int width, int height);
+
+/// 1 where the virtual depth is finite.
+std::vector<uint8_t> covered_pixels(const std::vector<float>& virtual_depth_m);
 
 }  // namespace artrace::ar

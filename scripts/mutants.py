@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Mutation testing: small deliberate bugs put into the product code one at a time, each built and
+run against the test suite in a scratch clone. A mutant that every test survives shows a rule the
+tests do not guard.
+
+    python3 scripts/mutants.py                 # every mutant of the catalogue (about 2 min each)
+    python3 scripts/mutants.py --list          # the catalogue
+    python3 scripts/mutants.py --only NAME ... # some of them
+    python3 scripts/mutants.py --report FILE   # also write the results as JSON
+
+The scratch clone is made from the working tree's HEAD (commit first), built once, then each mutant
+is applied, built incrementally, run with `ctest` (the whole suite, as the README's test command,
+stopping at the first failure), and reverted. A mutant whose text is not found exactly once is an
+error of the catalogue, reported as such: the catalogue must follow the code.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# name, file, exact text, replacement, why the replacement is wrong
+CATALOGUE = [
+    # occlusion scores and rules
+    ("occlusion-iou-constant", "ar/src/occlusion.cpp",
+     "s.iou = uni ? static_cast<double>(inter) / uni : 1.0;", "s.iou = 1.0;",
+     "the IoU of the occlusion mask would always read perfect"),
+    ("occlusion-boundary-zero", "ar/src/occlusion.cpp",
+     "s.boundary_px = (distance_sum(o_truth, f_est, none) + distance_sum(o_est, f_truth, none)) / s.boundary_pixels;",
+     "s.boundary_px = 0.0;",
+     "the boundary error would always read zero"),
+    ("occlusion-boundary-one-sided", "ar/src/occlusion.cpp",
+     "s.boundary_px = (distance_sum(o_truth, f_est, none) + distance_sum(o_est, f_truth, none)) / s.boundary_pixels;",
+     "s.boundary_px = o_est.empty() ? 0.0 : distance_sum(o_est, f_truth, none) / o_est.size();",
+     "a missed occlusion boundary would cost nothing"),
+    ("occlusion-large-holes-filled", "ar/src/occlusion.cpp",
+     "if (static_cast<int>(component.size()) <= max_hole_px) {", "if (true) {",
+     "large holes (no reading: beyond range, glass, black) would be grown over from their rim and hide the virtual surface"),
+    ("occlusion-fixed-band", "ar/src/occlusion.cpp",
+     "const double band = std::max(opt.min_band_m, opt.band_sigmas * sigma);", "const double band = 0.005;",
+     "the soft band would not follow the sensor's noise, which grows with distance squared"),
+    ("occlusion-median-not-far-side", "ar/src/occlusion.cpp",
+     "const size_t pick = window.size() * 3 / 4;", "const size_t pick = window.size() / 2;",
+     "holes at silhouettes (the sensor's shadow on the background) would be filled with the occluder's depth"),
+    # the watertight triangle test
+    ("triangle-no-double-fallback", "core/src/traversal.inc",
+     "uint32_t fix = movemask(alive & (eq(u, zero) | eq(v, zero) | eq(w, zero)));", "uint32_t fix = 0;",
+     "an edge function rounded to zero would not be recomputed: a ray near a shared edge can take the wrong triangle"),
+    ("triangle-rejects-exact-edges", "core/src/traversal.inc",
+     "const K reject = (lt(u, zero) | lt(v, zero) | lt(w, zero)) & (lt(zero, u) | lt(zero, v) | lt(zero, w));",
+     "const K reject = (lt(u, zero) | lt(v, zero) | lt(w, zero)) & (lt(zero, u) | lt(zero, v) | lt(zero, w)) | eq(u, zero) | eq(v, zero) | eq(w, zero);",
+     "rays through shared edges and vertices would leak through closed meshes"),
+    # kd-tree build
+    ("kdtree-no-empty-bonus", "core/src/kd_tree_build.cpp",
+     "const float lambda = (n_left == 0 || n_right == 0) ? opt_.empty_bonus : 1.0f;", "const float lambda = 1.0f;",
+     "the empty-space bonus would be ignored: empty space is no longer cut off"),
+    # ONI writer
+    ("oni-seek-table-offsets", "io/src/oni_writer.cpp",
+     "std::memcpy(entry + 12, &n->data_offsets[k], 8);", "std::memcpy(entry + 12, &n->added_offset, 8);",
+     "every seek-table entry would point at the wrong record"),
+    ("oni-undo-zero", "io/src/oni_writer.cpp",
+     "record_header(kNewData, n->id, 40, static_cast<uint32_t>(n->frame_bytes), n->last_data);",
+     "record_header(kNewData, n->id, 40, static_cast<uint32_t>(n->frame_bytes), 0);",
+     "the undo chain of data records would be broken"),
+    # TUM association
+    ("tum-pairing-window-one-side", "io/src/tum_reader.cpp",
+     "while (lo < depth.size() && depth[lo].time_s < color[c].time_s - max_dt_s) ++lo;",
+     "while (lo < depth.size() && depth[lo].time_s < color[c].time_s - 3.0 * max_dt_s) ++lo;",
+     "depth frames up to three windows before a colour frame would be paired with it"),
+    # thread-count determinism of the compositor
+    ("compositor-shadow-smoothing-in-place", "ar/src/compositor.cpp",
+     "  smooth = factor;\n  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {",
+     "  smooth = factor;\n  core::for_each_tile(w, h, opt.threads, [&](const core::Tile& tl) { for (int y = std::max(1, tl.y0); y < std::min(h - 1, tl.y1); ++y) { for (int x = std::max(1, tl.x0); x < std::min(w - 1, tl.x1); ++x) { const size_t i = static_cast<size_t>(y) * w + x; if (factor[i] != glm::vec3(1.0f)) factor[i] = 0.5f * (factor[i] + factor[i + 1]); } } });\n  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {",
+     "smoothing in place across tiles makes the shadows depend on how tiles are spread over threads"),
+]
+
+
+def run(cmd, cwd, log, timeout=None):
+    with open(log, "a") as f:
+        f.write("$ " + " ".join(cmd) + "\n")
+        f.flush()
+        return subprocess.run(cmd, cwd=cwd, stdout=f, stderr=subprocess.STDOUT, timeout=timeout).returncode
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--only", nargs="*", help="names of the mutants to run")
+    ap.add_argument("--list", action="store_true", help="print the catalogue")
+    ap.add_argument("--report", help="write the results as JSON")
+    ap.add_argument("--scratch", help="scratch folder (default: a new temporary one, kept for a look)")
+    ap.add_argument("--jobs", type=int, default=2, help="ctest -j")
+    args = ap.parse_args()
+
+    if args.list:
+        for name, path, _, _, why in CATALOGUE:
+            print(f"{name:40s} {path}: {why}")
+        return 0
+    chosen = [m for m in CATALOGUE if not args.only or m[0] in args.only]
+    if args.only and len(chosen) != len(args.only):
+        known = {m[0] for m in CATALOGUE}
+        print("unknown mutants: " + ", ".join(n for n in args.only if n not in known), file=sys.stderr)
+        return 2
+
+    top = Path(__file__).resolve().parent.parent
+    scratch = Path(args.scratch or tempfile.mkdtemp(prefix="artrace-mutants-"))
+    clone = scratch / "src"
+    log = scratch / "log.txt"
+    if not clone.exists():
+        subprocess.run(["git", "clone", "-q", "--local", str(top), str(clone)], check=True)
+    build = clone / "build"
+    env_data = os.environ.get("ARTRACE_SHARED_DATA", str((top.parent / "shared" / "data").resolve()))
+    print(f"scratch clone {clone} (log: {log})", flush=True)
+    if run(["cmake", "-S", ".", "-B", "build", "-G", "Ninja", "-DCMAKE_BUILD_TYPE=Release",
+            f"-DARTRACE_SHARED_DATA={env_data}"], clone, log) or run(["cmake", "--build", "build"], clone, log):
+        print("the unmutated tree does not build; see the log", file=sys.stderr)
+        return 2
+    if run(["ctest", "--test-dir", "build", "-j", str(args.jobs)], clone, log):
+        print("the unmutated tree fails its tests; see the log", file=sys.stderr)
+        return 2
+
+    results = []
+    for name, path, text, replacement, why in chosen:
+        f = clone / path
+        original = f.read_text()
+        count = original.count(text)
+        if count != 1:
+            print(f"{name:40s} CATALOGUE ERROR: its text occurs {count} times in {path}", flush=True)
+            results.append({"name": name, "file": path, "result": "catalogue error", "occurrences": count})
+            continue
+        f.write_text(original.replace(text, replacement))
+        t0 = time.time()
+        try:
+            if run(["cmake", "--build", "build"], clone, log):
+                result, failed = "killed (does not build)", []
+            else:
+                junit = scratch / f"{name}.xml"
+                code = run(["ctest", "--test-dir", "build", "-j", str(args.jobs), "--stop-on-failure",
+                            "--output-junit", str(junit)], clone, log, timeout=3600)
+                failed = []
+                if junit.exists():
+                    import xml.etree.ElementTree as ET
+                    for case in ET.parse(junit).getroot().iter("testcase"):
+                        if case.get("status") == "fail" or case.find("failure") is not None:
+                            failed.append(case.get("name"))
+                result = "killed" if code else "SURVIVED"
+        finally:
+            f.write_text(original)
+        seconds = time.time() - t0
+        print(f"{name:40s} {result:10s} {seconds:6.0f} s  {', '.join(failed[:3])}", flush=True)
+        results.append({"name": name, "file": path, "why": why, "result": result, "failed_tests": failed,
+                        "seconds": round(seconds)})
+    run(["cmake", "--build", "build"], clone, log)  # leave the clone unmutated and built
+
+    killed = sum(r["result"].startswith("killed") for r in results)
+    print(f"\n{killed} of {len(results)} mutants killed")
+    for r in results:
+        if not r["result"].startswith("killed"):
+            print(f"  {r['result']}: {r['name']} ({r['file']}): {r.get('why', '')}")
+    if args.report:
+        Path(args.report).write_text(json.dumps({"killed": killed, "total": len(results), "mutants": results}, indent=2) + "\n")
+    return 0 if killed == len(results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
