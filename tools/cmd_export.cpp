@@ -4,6 +4,7 @@
 #include "bench_util.h"
 #include "commands.h"
 #include "frame_views.h"
+#include "recording_options.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
@@ -31,12 +32,13 @@ struct Options {
   int first = 0, last = -1, threads = 0;
   double fps = 30.0;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
+  RecordingArgs rec;
 };
 
 void run(const Options& opt) {
   const io::ArSceneFile scene_file = io::load_ar_scene(opt.scene);
   io::ArRuntime runtime(scene_file);
-  auto source = io::open_recording(opt.recording);
+  auto source = open_recording(opt.recording, opt.rec, opt.quiet);
   const int64_t count = source->frame_count().value_or(0);
   const int64_t last = opt.last >= 0 ? std::min<int64_t>(opt.last, count - 1) : count - 1;
   if (opt.first < 0 || opt.first > last) throw std::invalid_argument("frame range " + std::to_string(opt.first) + ".." + std::to_string(last) + " is empty");
@@ -165,6 +167,7 @@ void add_export_command(CLI::App& app) {
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
   add_threads_option(cmd, opt->threads);
+  add_recording_options(cmd, opt->rec);
   cmd->callback([opt] { run(*opt); });
 
   auto dir = std::make_shared<std::string>();

@@ -8,6 +8,8 @@
 #include "artrace/io/aff_scene.h"
 #include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
+#include "artrace/io/oni_reader.h"
+#include "recording_options.h"
 #include "artrace/io/tum_reader.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/recording.h"
@@ -25,11 +27,49 @@ nlohmann::json intrinsics_json(const ar::PinholeIntrinsics& k) {
   return {{"width", k.width}, {"height", k.height}, {"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}};
 }
 
-nlohmann::json info_recording(const std::filesystem::path& path) {
-  auto src = io::open_recording(path);
-  ar::SensorFrame first;
+nlohmann::json info_oni(const std::filesystem::path& path) {
+  const io::OniContainer file(path);
+  nlohmann::json j;
+  j["version"] = std::to_string(file.version()[0]) + "." + std::to_string(file.version()[1]) + "." + std::to_string(file.version()[2]) + "." +
+                 std::to_string(file.version()[3]);
+  j["finalised"] = file.finalised();
+  nlohmann::json streams = nlohmann::json::array();
+  for (const io::OniNode& n : file.nodes()) {
+    static const char* kTypes[] = {"?", "device", "depth", "colour", "audio", "IR"};
+    nlohmann::json s{{"name", n.name}, {"type", n.type < 6 ? kTypes[n.type] : "?"}, {"codec", n.codec}, {"frames", n.frames.size()}};
+    if (n.width > 0) {
+      s["width"] = n.width;
+      s["height"] = n.height;
+      s["fps"] = n.fps;
+    }
+    if (!n.frames.empty()) {
+      s["first_timestamp_us"] = n.frames.front().timestamp_us;
+      s["last_timestamp_us"] = n.frames.back().timestamp_us;
+    }
+    streams.push_back(s);
+  }
+  j["streams"] = streams;
+  return j;
+}
+
+nlohmann::json info_recording(const std::filesystem::path& path, const RecordingArgs& args) {
   nlohmann::json j;
   j["kind"] = "recording";
+  const bool oni = !std::filesystem::is_directory(path);
+  std::unique_ptr<ar::FrameSource> src;
+  if (oni) {
+    j["oni"] = info_oni(path);  // what the file holds, even when it cannot be played
+    try {
+      src = open_recording(path.string(), args);
+    } catch (const io::ParseError& e) {
+      j["playable"] = false;
+      j["problem"] = e.what();
+      return j;
+    }
+  } else {
+    src = open_recording(path.string(), args);
+  }
+  ar::SensorFrame first;
   j["source"] = src->describe();
   j["frames"] = src->frame_count().value_or(-1);
   if (!src->next(first)) throw io::ParseError(path.string(), 0, 0, "holds no frame");
@@ -38,6 +78,8 @@ nlohmann::json info_recording(const std::filesystem::path& path) {
   j["depth_width"] = first.depth.width;
   j["depth_height"] = first.depth.height;
   j["color_intrinsics"] = intrinsics_json(first.color_intrinsics);
+  j["intrinsics_from"] = src->intrinsics_source();
+  j["depth_units_per_metre"] = src->depth_units_per_metre();
   j["first_time_s"] = first.color_time_s;
   j["has_pose"] = first.world_from_camera.has_value();
   if (const auto n = src->frame_count(); n && *n > 1) {
@@ -45,6 +87,18 @@ nlohmann::json info_recording(const std::filesystem::path& path) {
     ar::SensorFrame last;
     if (src->next(last)) j["duration_s"] = last.color_time_s - first.color_time_s;
   }
+  if (const auto* reader = dynamic_cast<const io::OniReader*>(src.get())) {
+    nlohmann::json gaps = nlohmann::json::array();
+    int dropped = 0;
+    for (const io::OniGap& g : reader->gaps()) {
+      gaps.push_back({{"stream", g.stream}, {"after_frame", g.after}, {"gap_ms", g.gap_ms}, {"missing", g.missing}});
+      dropped += g.missing;
+    }
+    j["dropped_frames"] = dropped;
+    j["gaps"] = gaps;
+    if (reader->registered()) j["depth_registered_to_colour"] = *reader->registered();
+  }
+  j["warnings"] = src->warnings();
   return j;
 }
 
@@ -149,11 +203,13 @@ void add_recording_commands(CLI::App& app) {
   {
     auto src = std::make_shared<std::string>();
     auto dst = std::make_shared<std::string>();
-    CLI::App* cmd = app.add_subcommand("convert", "Convert a recording (TUM folder or .oni) to .oni or the TUM layout");
-    cmd->add_option("source", *src, "TUM folder or .oni file")->required();
+    auto rec = std::make_shared<RecordingArgs>();
+    CLI::App* cmd = app.add_subcommand("convert", "Convert a recording (TUM folder, image folder or .oni) to .oni or the TUM layout");
+    cmd->add_option("source", *src, "TUM folder, image folder or .oni file")->required();
     cmd->add_option("-o,--output", *dst, "TUM folder, or a file ending in .oni")->required();
-    cmd->callback([src, dst] {
-      auto in = io::open_recording(*src);
+    add_recording_options(cmd, *rec);
+    cmd->callback([src, dst, rec] {
+      auto in = open_recording(*src, *rec);
       auto out = io::make_recording_writer(*dst);
       ar::SensorFrame f;
       int n = 0;
@@ -169,6 +225,7 @@ void add_recording_commands(CLI::App& app) {
     struct Options {
       std::string source, output, json;
       io::OdometryOptions odometry;
+      RecordingArgs rec;
     };
     auto opt = std::make_shared<Options>();
     CLI::App* cmd = app.add_subcommand("track", "Estimate the camera trajectory of a recording with RGB-D odometry");
@@ -177,8 +234,9 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--method", opt->odometry.method, "RgbdICPOdometry, RgbdOdometry or ICPOdometry")->capture_default_str();
     cmd->add_option("--frames", opt->odometry.max_frames, "frames to track (0 = all)")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->add_option("--json", opt->json, "write the drift report as JSON");
+    add_recording_options(cmd, opt->rec);
     cmd->callback([opt] {
-      auto in = io::open_recording(opt->source);
+      auto in = open_recording(opt->source, opt->rec);
       const auto t0 = std::chrono::steady_clock::now();
       const io::OdometryResult r = io::estimate_trajectory(*in, opt->odometry);
       const double s = ms_since(t0) / 1000.0;
@@ -198,39 +256,59 @@ void add_recording_commands(CLI::App& app) {
   {
     auto path = std::make_shared<std::string>();
     auto json = std::make_shared<std::string>();
+    auto rec = std::make_shared<RecordingArgs>();
     CLI::App* cmd = app.add_subcommand("info", "What a recording, ONI file, AFF scene, glTF model or AR scene holds, or why it cannot be read");
     cmd->add_option("path", *path, "TUM folder, image folder, .oni file, .aff scene, .gltf/.glb model or AR scene .json")->required();
     cmd->add_option("--json", *json, "also write the answer as JSON");
-    cmd->callback([path, json] {
+    add_recording_options(cmd, *rec);
+    cmd->callback([path, json, rec] {
       const std::filesystem::path p(*path);
       const std::string ext = p.extension().string();
       const nlohmann::json j = ext == ".aff"                      ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
                                : ext == ".json"                  ? info_ar_scene(p)
-                                                                 : info_recording(p);
+                                                                 : info_recording(p, *rec);
       std::cout << *path << "\n";
       for (const auto& [key, value] : j.items()) std::cout << "  " << key << ": " << value.dump() << "\n";
       write_json(*json, j);
     });
   }
   {
-    auto src = std::make_shared<std::string>();
-    auto json = std::make_shared<std::string>();
-    CLI::App* cmd = app.add_subcommand("bench-io", "Frames per second a recording is delivered at, decoding included");
-    cmd->add_option("source", *src, "TUM folder or .oni file")->required();
-    cmd->add_option("--json", *json, "write the result as JSON");
-    cmd->callback([src, json] {
-      auto in = io::open_recording(*src);
+    struct Options {
+      std::string source, json;
+      int min_frames = 300;
+      RecordingArgs rec;
+    };
+    auto opt = std::make_shared<Options>();
+    CLI::App* cmd = app.add_subcommand("bench-io", "Frames per second a recording is read at on one thread, decoding included");
+    cmd->add_option("source", opt->source, "TUM folder, image folder or .oni file")->required();
+    cmd->add_option("--min-frames", opt->min_frames, "read the recording again until this many frames are timed")
+        ->capture_default_str()
+        ->check(CLI::Range(1, 10000000));
+    cmd->add_option("--json", opt->json, "write the result as JSON");
+    add_recording_options(cmd, opt->rec);
+    cmd->callback([opt] {
+      auto in = open_recording(opt->source, opt->rec);
       ar::SensorFrame f;
       in->next(f);  // warm-up: first frame, file caches
-      in->rewind();
+      std::vector<double> frame_ms;
+      int n = 0, passes = 0;
       const auto t0 = std::chrono::steady_clock::now();
-      int n = 0;
-      while (in->next(f)) ++n;
+      while (n < opt->min_frames) {
+        in->rewind();
+        ++passes;
+        for (auto tf = std::chrono::steady_clock::now(); in->next(f); tf = std::chrono::steady_clock::now()) {
+          frame_ms.push_back(ms_since(tf));
+          ++n;
+        }
+        if (n == 0) throw std::runtime_error(opt->source + ": holds no frame");
+      }
       const double s = ms_since(t0) / 1000.0;
       const double fps = s > 0.0 ? n / s : 0.0;
-      std::printf("%s: %d frames in %.3f s = %.1f frames/s\n", src->c_str(), n, s, fps);
-      write_json(*json, {{"source", *src}, {"frames", n}, {"seconds", s}, {"fps", fps}});
+      std::printf("%s: %d frames (%d passes) in %.3f s on one thread = %.1f frames/s, median %.2f ms a frame (%dx%d)\n",
+                  opt->source.c_str(), n, passes, s, fps, median(frame_ms), f.color.width, f.color.height);
+      write_json(opt->json, {{"source", opt->source}, {"frames", n}, {"passes", passes}, {"seconds", s}, {"fps", fps},
+                             {"frame_ms_median", median(frame_ms)}, {"width", f.color.width}, {"height", f.color.height}});
     });
   }
 }

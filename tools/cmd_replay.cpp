@@ -8,6 +8,7 @@
 // trace, composite). Without a display it says so and points to `artrace export`.
 #include "bench_util.h"
 #include "commands.h"
+#include "recording_options.h"
 #include "frame_views.h"
 
 #include "artrace/ar/compositor.h"
@@ -66,6 +67,7 @@ struct Options {
   int threads = 0, frames = 0;
   double speed = 1.0;
   bool loop = false;
+  RecordingArgs rec;
 };
 
 enum class View { kComposite, kSideBySide, kDepth };
@@ -77,7 +79,7 @@ struct Timing {
 class Replay {
  public:
   explicit Replay(const Options& opt)
-      : opt_(opt), scene_file_(io::load_ar_scene(opt.scene)), runtime_(scene_file_), source_(io::open_recording(opt.recording)) {
+      : opt_(opt), scene_file_(io::load_ar_scene(opt.scene)), runtime_(scene_file_), source_(open_recording(opt.recording, opt.rec)) {
     count_ = source_->frame_count().value_or(0);
     if (count_ <= 0) throw std::runtime_error(opt.recording + ": no frames");
     copt_.lights = runtime_.lights();
@@ -321,6 +323,7 @@ void add_replay_command(CLI::App& app) {
   cmd->add_option("--frames", opt->frames, "quit after showing this many frames (0: run until q)")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--keys", opt->keys, "keys to press first, one per shown frame (e.g. \"o\" starts without occlusion)");
   cmd->add_option("--screenshot", opt->screenshot, "on quitting, save the last view (with its head-up display) as PNG");
+  add_recording_options(cmd, opt->rec);
   cmd->callback([opt] {
     std::string why;
     if (!display_available(why)) {

@@ -19,11 +19,10 @@ ar::DepthImage depth_from_u16(const cv::Mat& raw, double per_metre) {
   d.width = raw.cols;
   d.height = raw.rows;
   d.depth_m.resize(static_cast<size_t>(raw.cols) * raw.rows);
-  const float scale = static_cast<float>(1.0 / per_metre);
   for (int y = 0; y < raw.rows; ++y) {
     const uint16_t* row = raw.ptr<uint16_t>(y);
     float* out = d.depth_m.data() + static_cast<size_t>(y) * raw.cols;
-    for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : row[x] * scale;
+    for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : ar::depth_metres(row[x], per_metre);
   }
   return d;
 }

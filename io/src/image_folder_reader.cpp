@@ -62,11 +62,18 @@ ImageFolderReader::ImageFolderReader(const std::filesystem::path& folder, const 
     const double fps = video_->cap.get(cv::CAP_PROP_FPS);
     if (fps > 0.0) options_.fps = fps;
   }
-  if (std::filesystem::exists(folder / "trajectory.txt")) trajectory_ = read_tum_trajectory(folder / "trajectory.txt");
+  if (options.trajectory) trajectory_ = read_tum_trajectory(*options.trajectory);
+  else if (std::filesystem::exists(folder / "trajectory.txt")) trajectory_ = read_tum_trajectory(folder / "trajectory.txt");
   if (options.intrinsics) {
     intrinsics_ = options.intrinsics;
+    intrinsics_source_ = "given";
   } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
     intrinsics_ = read_intrinsics(folder / "intrinsics.txt");
+    intrinsics_source_ = (folder / "intrinsics.txt").string();
+  } else {
+    intrinsics_source_ = "defaults";
+    warnings_.push_back(folder.string() + ": no intrinsics file (intrinsics.txt, intrinsics.json, camera.yaml): default intrinsics fx = fy = "
+                        "525 px at 640 wide (scaled with the width), principal point at the centre (give the camera's own with --intrinsics)");
   }
 }
 

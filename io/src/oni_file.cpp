@@ -1,150 +1,296 @@
 #include "artrace/io/oni_file.h"
 #include "artrace/io/parse_error.h"
 
+#include <algorithm>
 #include <cstring>
-#include <fstream>
-#include <map>
+#include <tuple>
 
 namespace artrace::io {
 namespace {
 
-constexpr uint32_t kRecordMagic = 0x0052494E;
+constexpr uint32_t kRecordMagic = 0x0052494E;  // "NIR\0"
+enum : uint32_t {
+  kNodeAdded104 = 0x02,
+  kIntProperty = 0x03,
+  kRealProperty = 0x04,
+  kStringProperty = 0x05,
+  kGeneralProperty = 0x06,
+  kNodeRemoved = 0x07,
+  kNodeDataBegin = 0x08,
+  kNodeStateReady = 0x09,
+  kNewData = 0x0A,
+  kEnd = 0x0B,
+  kNodeAdded105 = 0x0C,
+  kNodeAdded = 0x0D,
+  kSeekTable = 0x0E,
+};
+// Sanity limits: the largest property OpenNI records is the depth-to-shift table (20,002 bytes); a
+// 1280x1024 RGB frame is 3.9 MB.
+constexpr uint32_t kMaxFields = 1u << 20;
+constexpr uint32_t kMaxPayload = 64u << 20;
+constexpr int kMaxSide = 16384;
 
-class Bytes {
+/// The fields of one record, read from the file, with bounds-checked access.
+class Fields {
  public:
-  Bytes(const std::filesystem::path& path, std::vector<uint8_t> data) : path_(path), data_(std::move(data)) {}
-  [[noreturn]] void fail(uint64_t at, const std::string& what) const {
-    throw ParseError(path_.string() + " @ byte " + std::to_string(at), 0, 0, what);
-  }
+  Fields(const OniContainer& c, uint64_t offset, std::vector<uint8_t> bytes) : c_(c), offset_(offset), b_(std::move(bytes)) {}
+  [[noreturn]] void fail(size_t at, const std::string& what) const { throw ParseError(c_.where(offset_ + at), 0, 0, what); }
   template <class T>
-  T get(uint64_t at) const {
-    if (at + sizeof(T) > data_.size()) fail(at, "truncated: the file ends inside a record");
+  T get(size_t& at) const {
+    if (at + sizeof(T) > b_.size()) fail(at, "record fields end inside a value (fields size too small)");
     T v;
-    std::memcpy(&v, data_.data() + at, sizeof(T));
+    std::memcpy(&v, b_.data() + at, sizeof(T));
+    at += sizeof(T);
     return v;
   }
-  std::string str(uint64_t at, uint32_t& consumed) const {
+  std::string name(size_t& at) const {
     const uint32_t len = get<uint32_t>(at);
-    if (len == 0 || len > 80) fail(at, "string length " + std::to_string(len) + " out of range (1..80)");
-    if (at + 4 + len > data_.size()) fail(at, "truncated inside a string");
-    const std::string s(reinterpret_cast<const char*>(data_.data() + at + 4), len - 1);
-    // names of nodes and properties: OpenNI2's player crashed (SIGSEGV) on a byte above 127 in a
-    // property name, found by fuzzing; control bytes are refused as malformed
-    for (const char c : s) {
-      if (c < 0x20 || c > 0x7e) {
-        fail(at, "name holds byte " + std::to_string(static_cast<unsigned char>(c)) +
-                     ", outside printable ASCII (OpenNI2's player crashed on bytes above 127 in property names)");
-      }
+    if (len == 0 || len > 80) fail(at - 4, "name length " + std::to_string(len) + " out of range (1..80)");
+    if (at + len > b_.size()) fail(at, "record fields end inside a name");
+    std::string s(reinterpret_cast<const char*>(b_.data() + at), len);
+    if (s.back() == '\0') s.pop_back();
+    for (const char ch : s) {
+      if (ch < 0x20 || ch > 0x7e) fail(at, "name holds byte " + std::to_string(static_cast<unsigned char>(ch)) + ", outside printable ASCII");
     }
-    consumed = 4 + len;
+    at += len;
     return s;
   }
-  uint64_t size() const { return data_.size(); }
+  std::vector<uint8_t> bytes(size_t& at, uint32_t n) const {
+    if (at + n > b_.size()) fail(at, "property of " + std::to_string(n) + " bytes runs past its record");
+    std::vector<uint8_t> v(b_.begin() + static_cast<std::ptrdiff_t>(at), b_.begin() + static_cast<std::ptrdiff_t>(at + n));
+    at += n;
+    return v;
+  }
 
  private:
-  std::filesystem::path path_;
-  std::vector<uint8_t> data_;
+  const OniContainer& c_;
+  uint64_t offset_;
+  std::vector<uint8_t> b_;
 };
+
+template <class T>
+T from_bytes(const std::vector<uint8_t>& v) {
+  T x{};
+  std::memcpy(&x, v.data(), std::min(sizeof(T), v.size()));
+  return x;
+}
 
 }  // namespace
 
-OniFileInfo inspect_oni(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
-  std::vector<uint8_t> data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const Bytes b(path, std::move(data));
-  const uint32_t magic = b.size() >= 24 ? b.get<uint32_t>(0) : 0;
-  if (std::memcmp(&magic, "NI10", 4) != 0) {
-    b.fail(0, "not an ONI file (no 'NI10' header)");
+std::optional<int64_t> OniNode::int_property(const std::string& name) const {
+  const auto it = properties.find(name);
+  if (it == properties.end() || it->second.size() != 8) return std::nullopt;
+  return from_bytes<int64_t>(it->second);
+}
+
+std::optional<double> OniNode::real_property(const std::string& name) const {
+  const auto it = properties.find(name);
+  if (it == properties.end() || it->second.size() != 8) return std::nullopt;
+  return from_bytes<double>(it->second);
+}
+
+std::string OniContainer::where(uint64_t offset) const { return path_.string() + " @ byte " + std::to_string(offset); }
+
+const OniNode* OniContainer::find(uint32_t type) const {
+  for (const OniNode& n : nodes_) {
+    if (n.type == type) return &n;
   }
-  const uint8_t major = b.get<uint8_t>(4), minor = b.get<uint8_t>(5);
-  const uint16_t maint = b.get<uint16_t>(6);
-  if (major != 1 || minor != 0 || maint != 1) {
-    b.fail(4, "unsupported ONI version " + std::to_string(major) + "." + std::to_string(minor) + "." +
-                  std::to_string(maint) + " (this reader takes 1.0.1.x)");
+  return nullptr;
+}
+
+void OniContainer::read_payload(const OniFrameRecord& f, std::vector<uint8_t>& out) const {
+  out.resize(f.data_size);
+  in_.clear();
+  in_.seekg(static_cast<std::streamoff>(f.data_offset));
+  if (!in_.read(reinterpret_cast<char*>(out.data()), f.data_size)) throw ParseError(where(f.data_offset), 0, 0, "cannot read the frame's data");
+}
+
+OniContainer::OniContainer(const std::filesystem::path& path) : path_(path) {
+  in_.open(path, std::ios::binary);
+  if (!in_) throw ParseError(path.string(), 0, 0, "cannot open file");
+  in_.seekg(0, std::ios::end);
+  size_ = static_cast<uint64_t>(in_.tellg());
+  in_.seekg(0);
+  auto read_at = [&](uint64_t at, void* out, size_t n) {
+    in_.clear();
+    in_.seekg(static_cast<std::streamoff>(at));
+    return static_cast<bool>(in_.read(static_cast<char*>(out), static_cast<std::streamsize>(n)));
+  };
+  uint8_t head[24];
+  if (size_ < 24 || !read_at(0, head, 24) || std::memcmp(head, "NI10", 4) != 0) {
+    throw ParseError(where(0), 0, 0, "not an ONI file (no 'NI10' header)");
   }
-  const uint32_t max_node = b.get<uint32_t>(20);
-  OniFileInfo info;
-  std::map<uint32_t, size_t> node_index;
-  std::map<uint32_t, bool> ready;
-  bool data_begin = false;
+  version_[0] = head[4];
+  version_[1] = head[5];
+  uint16_t maint;
+  std::memcpy(&maint, head + 6, 2);
+  version_[2] = maint;
+  std::memcpy(&version_[3], head + 8, 4);
+  uint64_t max_ts;
+  uint32_t max_node;
+  std::memcpy(&max_ts, head + 12, 8);
+  std::memcpy(&max_node, head + 20, 4);
+  const auto v = std::make_tuple(version_[0], version_[1], version_[2], version_[3]);
+  if (v < std::make_tuple(1u, 0u, 0u, 4u) || v >= std::make_tuple(1u, 1u, 0u, 0u)) {
+    throw ParseError(where(4), 0, 0, "unsupported ONI version " + std::to_string(version_[0]) + "." + std::to_string(version_[1]) + "." +
+                                         std::to_string(version_[2]) + "." + std::to_string(version_[3]) +
+                                         " (this reader takes 1.0.0.4 to 1.0.1.x)");
+  }
+  const bool old_layout = v < std::make_tuple(1u, 0u, 1u, 0u);
+  header_ = old_layout ? 24 : 28;
+  const bool header_unfinished = max_ts == ~0ull && max_node == 0xffffffffu;
+
+  std::map<uint32_t, size_t> index;  // node id -> nodes_ (never sized by the header's maximum)
+  auto node_of = [&](const OniRecord& r, const char* what) -> OniNode& {
+    const auto it = index.find(r.node);
+    if (it == index.end()) throw ParseError(where(r.offset), 0, 0, std::string(what) + " for node " + std::to_string(r.node) + ", which was never added");
+    return nodes_[it->second];
+  };
   uint64_t at = 24;
+  std::vector<uint8_t> raw(static_cast<size_t>(header_));
   for (;;) {
-    if (at >= b.size()) b.fail(at, "no End record: the file is truncated");
-    if (b.get<uint32_t>(at) != kRecordMagic) b.fail(at, "bad record magic (corrupt file)");
-    const uint32_t type = b.get<uint32_t>(at + 4), node = b.get<uint32_t>(at + 8);
-    const uint32_t fields = b.get<uint32_t>(at + 12), payload = b.get<uint32_t>(at + 16);
-    if (fields < 28) b.fail(at, "record fields size " + std::to_string(fields) + " is below 28");
-    if (at + fields + payload > b.size()) b.fail(at, "truncated: record runs past the end of the file");
-    if (node > max_node) b.fail(at, "node id " + std::to_string(node) + " above the header's maximum " + std::to_string(max_node));
-    const uint64_t f = at + 28;
-    switch (type) {
-      case 0x0B:  // End
-        info.end_offset = at;
-        if (!data_begin) b.fail(at, "no DataBegin record before End");
-        for (const auto& [id, ok] : ready) {
-          if (!ok) b.fail(at, "node " + std::to_string(id) + " has no StateReady record");
+    if (size_ - at < static_cast<uint64_t>(header_)) {
+      if (at < size_ && !has_end()) warnings_.push_back(where(at) + ": " + std::to_string(size_ - at) + " bytes after the last whole record (dropped)");
+      break;
+    }
+    read_at(at, raw.data(), raw.size());
+    OniRecord r;
+    r.offset = at;
+    uint32_t magic;
+    std::memcpy(&magic, raw.data(), 4);
+    std::memcpy(&r.type, raw.data() + 4, 4);
+    std::memcpy(&r.node, raw.data() + 8, 4);
+    std::memcpy(&r.fields_size, raw.data() + 12, 4);
+    std::memcpy(&r.payload_size, raw.data() + 16, 4);
+    if (old_layout) {
+      uint32_t undo;
+      std::memcpy(&undo, raw.data() + 20, 4);
+      r.undo = undo;
+    } else {
+      std::memcpy(&r.undo, raw.data() + 20, 8);
+    }
+    if (magic != kRecordMagic) {
+      // after End, OpenNI's recorder may pad the file; before it, a recording cut off mid-write
+      if (!has_end()) warnings_.push_back(where(at) + ": no record here (bad record magic): the recording is read up to this byte");
+      break;
+    }
+    if (r.fields_size < static_cast<uint32_t>(header_) || r.fields_size > kMaxFields) {
+      throw ParseError(where(at), 0, 0, "record fields size " + std::to_string(r.fields_size) + " out of range (" + std::to_string(header_) + ".." +
+                                            std::to_string(kMaxFields) + ")");
+    }
+    if (r.payload_size > kMaxPayload) throw ParseError(where(at), 0, 0, "record payload of " + std::to_string(r.payload_size) + " bytes (corrupt size)");
+    if (at + r.fields_size + r.payload_size > size_) {
+      warnings_.push_back(where(at) + ": the last record runs " + std::to_string(at + r.fields_size + r.payload_size - size_) +
+                          " bytes past the end of the file (a recording cut short): dropped");
+      break;
+    }
+    std::vector<uint8_t> fb(r.fields_size - static_cast<uint32_t>(header_));
+    if (!fb.empty()) read_at(at + static_cast<uint64_t>(header_), fb.data(), fb.size());
+    const Fields f(*this, at + static_cast<uint64_t>(header_), std::move(fb));
+    size_t p = 0;
+    switch (r.type) {
+      case kNodeAdded:
+      case kNodeAdded105:
+      case kNodeAdded104: {
+        OniNode n;
+        n.id = r.node;
+        n.name = f.name(p);
+        n.type = f.get<uint32_t>(p);
+        const uint32_t codec = f.get<uint32_t>(p);
+        n.codec.assign(reinterpret_cast<const char*>(&codec), 4);
+        for (char& ch : n.codec) {
+          if (ch < 0x20 || ch > 0x7e) ch = '?';
         }
-        return info;
-      case 0x0D: {  // NodeAdded
-        OniNodeInfo n;
-        n.id = node;
-        uint32_t used = 0;
-        n.name = b.str(f, used);
-        n.type = b.get<uint32_t>(f + used);
-        n.codec = b.get<uint32_t>(f + used + 4);
-        n.frames = b.get<uint32_t>(f + used + 8);
-        if (n.codec == 0) b.fail(at, "node '" + n.name + "' has codec 0 (OpenNI2 crashes on it)");
-        node_index[node] = info.nodes.size();
-        info.nodes.push_back(n);
-        ready[node] = false;
+        if (r.type != kNodeAdded104) {
+          n.declared_frames = f.get<uint32_t>(p);
+          f.get<uint64_t>(p);  // min and max timestamps: recounted from the frames
+          f.get<uint64_t>(p);
+        }
+        if (r.type == kNodeAdded) n.declared_seek_table = old_layout ? f.get<uint32_t>(p) : f.get<uint64_t>(p);
+        if (index.count(r.node)) throw ParseError(where(at), 0, 0, "node " + std::to_string(r.node) + " ('" + n.name + "') is added twice");
+        index[r.node] = nodes_.size();
+        nodes_.push_back(std::move(n));
         break;
       }
-      case 0x03: case 0x04: case 0x05: case 0x06: {  // properties
-        if (!node_index.count(node)) b.fail(at, "property for node " + std::to_string(node) + " before it was added");
-        uint32_t used = 0;
-        const std::string name = b.str(f, used);
-        OniNodeInfo& n = info.nodes[node_index[node]];
-        n.has_mode |= name == "xnMapOutputMode";
-        n.has_cropping |= name == "xnCropping";
-        if (type == 0x06 && name == "xnMapOutputMode") {
-          if (b.get<uint32_t>(f + used) != 12) b.fail(at, "xnMapOutputMode must hold 12 bytes");
-          n.width = static_cast<int>(b.get<uint32_t>(f + used + 4));
-          n.height = static_cast<int>(b.get<uint32_t>(f + used + 8));
-          n.fps = static_cast<int>(b.get<uint32_t>(f + used + 12));
+      case kIntProperty:
+      case kRealProperty:
+      case kStringProperty:
+      case kGeneralProperty: {
+        OniNode& n = node_of(r, "a property");
+        const std::string name = f.name(p);
+        const uint32_t size = f.get<uint32_t>(p);
+        if ((r.type == kIntProperty || r.type == kRealProperty) && size != 8) {
+          f.fail(p - 4, "property '" + name + "' of " + std::to_string(size) + " bytes (numbers take 8)");
+        }
+        std::vector<uint8_t> value = f.bytes(p, size);
+        if (name == "xnMapOutputMode") {
+          if (size != 12) f.fail(p - size, "xnMapOutputMode of " + std::to_string(size) + " bytes (expected 12)");
+          uint32_t mode[3];
+          std::memcpy(mode, value.data(), 12);
+          if (mode[0] < 1 || mode[1] < 1 || mode[0] > kMaxSide || mode[1] > kMaxSide || mode[2] > 1000) {
+            f.fail(p - size, "xnMapOutputMode " + std::to_string(mode[0]) + "x" + std::to_string(mode[1]) + " at " + std::to_string(mode[2]) +
+                                 " fps is out of range");
+          }
+          n.width = static_cast<int>(mode[0]);
+          n.height = static_cast<int>(mode[1]);
+          n.fps = static_cast<int>(mode[2]);
+        }
+        n.properties[name] = std::move(value);
+        break;
+      }
+      case kNewData: {
+        OniNode& n = node_of(r, "frame data");
+        if (has_end()) break;  // frames end at End
+        OniFrameRecord fr;
+        fr.record_offset = at;
+        fr.data_offset = at + r.fields_size;
+        fr.data_size = r.payload_size;
+        fr.timestamp_us = f.get<uint64_t>(p);
+        fr.frame_number = f.get<uint32_t>(p);
+        fr.width = n.width;
+        fr.height = n.height;
+        fr.undo = r.undo;
+        if (n.width == 0) throw ParseError(where(at), 0, 0, "frame data for node '" + n.name + "' before its xnMapOutputMode property");
+        n.frames.push_back(fr);
+        break;
+      }
+      case kSeekTable: {
+        OniNode& n = node_of(r, "a seek table");
+        const uint32_t entry = old_layout ? 16 : 20;
+        if (r.payload_size % entry != 0) throw ParseError(where(at), 0, 0, "seek table of " + std::to_string(r.payload_size) + " bytes is not a whole number of entries");
+        std::vector<uint8_t> table(r.payload_size);
+        read_at(at + r.fields_size, table.data(), table.size());
+        n.seek_table.clear();
+        for (size_t k = 0; k < table.size(); k += entry) {
+          OniSeekEntry e;
+          std::memcpy(&e.timestamp_us, &table[k], 8);
+          std::memcpy(&e.config_id, &table[k + 8], 4);
+          if (old_layout) {
+            uint32_t off;
+            std::memcpy(&off, &table[k + 12], 4);
+            e.offset = off;
+          } else {
+            std::memcpy(&e.offset, &table[k + 12], 8);
+          }
+          n.seek_table.push_back(e);
         }
         break;
       }
-      case 0x09:
-        if (!node_index.count(node)) b.fail(at, "StateReady for an unknown node");
-        ready[node] = true;
+      case kEnd:
+        // End's node id is left unset (0xFFFFFFFF) by OpenNI 1.x: not checked
+        if (!has_end()) end_offset_ = at;
         break;
-      case 0x08:
-        data_begin = true;
-        break;
-      case 0x0A: {  // NewData
-        if (!node_index.count(node)) b.fail(at, "frame data for an unknown node");
-        OniNodeInfo& n = info.nodes[node_index[node]];
-        // without either property the player drops every frame of the stream (oni-format.md)
-        if (!n.has_mode || !n.has_cropping) {
-          b.fail(at, "frame data for node '" + n.name + "' before its " + (n.has_mode ? "xnCropping" : "xnMapOutputMode") +
-                         " property (OpenNI2 plays no frame without it)");
-        }
-        const uint32_t number = b.get<uint32_t>(f + 8);
-        if (number == 0 || number > n.frames) {
-          b.fail(at, "frame number " + std::to_string(number) + " outside 1.." + std::to_string(n.frames));
-        }
-        if (payload > 5760000u) b.fail(at, "frame of " + std::to_string(payload) + " bytes is larger than OpenNI2 plays");
-        ++n.data_records;
-        break;
-      }
-      case 0x07: case 0x0E:
+      case kNodeRemoved:
+      case kNodeDataBegin:
+      case kNodeStateReady:
         break;
       default:
-        b.fail(at, "unknown record type " + std::to_string(type));
+        throw ParseError(where(at), 0, 0, "unknown record type " + std::to_string(r.type));
     }
-    at += fields + static_cast<uint64_t>(payload);
+    records_.push_back(r);
+    at += r.fields_size + static_cast<uint64_t>(r.payload_size);
   }
+  finalised_ = has_end() && !header_unfinished;
 }
 
 }  // namespace artrace::io

@@ -1,6 +1,8 @@
 #include "artrace/io/oni_writer.h"
 
+#include <algorithm>
 #include <cstring>
+#include <tuple>
 #include <stdexcept>
 
 namespace artrace::io {
@@ -134,24 +136,22 @@ void OniWriter::stream_properties(Node& n, const OniStreamFormat& f, bool depth,
   if (depth) int_property(n.id, "xnDeviceMaxDepth", max_depth_mm);
 }
 
-void OniWriter::write(const uint16_t* depth_mm, const uint8_t* rgb, uint64_t timestamp_us) {
+void OniWriter::write(const uint16_t* depth_mm, const uint8_t* rgb, uint64_t depth_us, uint64_t color_us) {
   if (!file_) throw std::logic_error(path_.string() + ": write after close");
-  if (frames_ > 0 && timestamp_us <= last_ts_) {
+  if (frames_ > 0 && (depth_us <= depth_.timestamps.back() || color_us <= color_.timestamps.back())) {
     throw std::invalid_argument(path_.string() + ": timestamps must increase");
   }
-  if (frames_ == 0) first_ts_ = timestamp_us;
-  last_ts_ = timestamp_us;
-  timestamps_.push_back(timestamp_us);
   ++frames_;
-  const std::pair<Node*, const void*> streams[2] = {{&depth_, depth_mm}, {&color_, rgb}};
-  for (const auto& [n, data] : streams) {
+  const std::tuple<Node*, const void*, uint64_t> streams[2] = {{&depth_, depth_mm, depth_us}, {&color_, rgb, color_us}};
+  for (const auto& [n, data, ts] : streams) {
     const uint64_t at = tell();
     record_header(kNewData, n->id, 40, static_cast<uint32_t>(n->frame_bytes), n->last_data);
-    put(&timestamp_us, 8);
+    put(&ts, 8);
     put(&frames_, 4);  // frame numbers start at 1
     put(data, n->frame_bytes);
     n->last_data = at;
     n->data_offsets.push_back(at);
+    n->timestamps.push_back(ts);
   }
 }
 
@@ -165,7 +165,7 @@ void OniWriter::close() {
     for (uint32_t k = 0; k < frames_; ++k) {
       // entry k + 1: timestamp, configuration id 0, offset of the frame's NewData record
       uint8_t entry[20] = {};
-      std::memcpy(entry, &timestamps_[k], 8);
+      std::memcpy(entry, &n->timestamps[k], 8);
       std::memcpy(entry + 12, &n->data_offsets[k], 8);
       put(entry, 20);
     }
@@ -173,15 +173,17 @@ void OniWriter::close() {
     // timestamp and the seek-table position
     const uint64_t end = tell();
     std::fseek(file_, static_cast<long>(n->added_offset + kHeaderSize + 4 + n->name_bytes + 8), SEEK_SET);
+    const uint64_t first = n->timestamps.empty() ? 0 : n->timestamps.front(), last = n->timestamps.empty() ? 0 : n->timestamps.back();
     put(&frames_, 4);
-    put(&first_ts_, 8);
-    put(&last_ts_, 8);
+    put(&first, 8);
+    put(&last, 8);
     put(&table_at, 8);
     std::fseek(file_, static_cast<long>(end), SEEK_SET);
   }
   record_header(kEnd, 0, kHeaderSize, 0, 0);
   std::fseek(file_, 12, SEEK_SET);
-  put(&last_ts_, 8);  // the player rejects frames later than this
+  const uint64_t last_ts = frames_ ? std::max(depth_.timestamps.back(), color_.timestamps.back()) : 0;
+  put(&last_ts, 8);  // the player rejects frames later than this
   const bool ok = std::fflush(file_) == 0;
   std::fclose(file_);
   file_ = nullptr;

@@ -104,7 +104,8 @@ class OniRecordingWriter : public RecordingWriter {
                                             fmt(f.color_intrinsics, f.color.width, f.color.height));
     }
     const std::vector<uint16_t> d = depth_units(f.depth, 1000.0);
-    writer_->write(d.data(), f.color.rgb.data(), static_cast<uint64_t>(std::llround(f.color_time_s * 1e6)));
+    writer_->write(d.data(), f.color.rgb.data(), static_cast<uint64_t>(std::llround(f.depth_time_s * 1e6)),
+                   static_cast<uint64_t>(std::llround(f.color_time_s * 1e6)));
     add_pose(poses_, f);
   }
   void close() override {

@@ -191,21 +191,22 @@ TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& opti
   if (color.empty()) throw ParseError((folder / "rgb.txt").string(), 0, 0, "lists no frames");
   const auto pairs = associate(color, depth, options.max_dt_s);
   if (pairs.size() < color.size()) {
-    std::cerr << "warning: " << folder.string() << ": " << color.size() - pairs.size()
-              << " colour frames have no depth frame within " << options.max_dt_s << " s and are skipped\n";
+    std::ostringstream m;
+    m << folder.string() << ": " << color.size() - pairs.size() << " colour frames have no depth frame within " << options.max_dt_s
+      << " s and are skipped";
+    warnings_.push_back(m.str());
   }
   size_t missing = 0;
   for (const auto& [c, d] : pairs) {
     if (!std::filesystem::exists(folder / color[c].file) || !std::filesystem::exists(folder / depth[d].file)) {
       if (++missing <= 3) {
-        std::cerr << "warning: " << folder.string() << ": frame " << color[c].file << " / " << depth[d].file
-                  << " is listed but missing, skipped\n";
+        warnings_.push_back(folder.string() + ": frame " + color[c].file + " / " + depth[d].file + " is listed but missing, skipped");
       }
       continue;
     }
     frames_.push_back({color[c], depth[d]});
   }
-  if (missing > 3) std::cerr << "warning: " << folder.string() << ": " << missing << " listed frames missing in all\n";
+  if (missing > 3) warnings_.push_back(folder.string() + ": " + std::to_string(missing) + " listed frames missing in all");
   if (frames_.empty()) throw ParseError(folder.string(), 0, 0, "no frame has both a colour and a depth image");
 
   if (options.trajectory) {
@@ -215,10 +216,26 @@ TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& opti
   }
   if (options.intrinsics) {
     intrinsics_ = *options.intrinsics;
+    intrinsics_source_ = "given";
   } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
     intrinsics_ = read_intrinsics(folder / "intrinsics.txt");
+    intrinsics_source_ = (folder / "intrinsics.txt").string();
   } else {
-    intrinsics_ = freiburg_intrinsics(std::filesystem::absolute(folder).lexically_normal().string());
+    const std::string name = std::filesystem::absolute(folder).lexically_normal().string();
+    intrinsics_ = freiburg_intrinsics(name);
+    const int fr = name.find("freiburg1") != std::string::npos || name.find("fr1") != std::string::npos   ? 1
+                   : name.find("freiburg2") != std::string::npos || name.find("fr2") != std::string::npos ? 2
+                   : name.find("freiburg3") != std::string::npos || name.find("fr3") != std::string::npos ? 3
+                                                                                                        : 0;
+    if (fr > 0) {
+      intrinsics_source_ = "the TUM benchmark's Freiburg " + std::to_string(fr) + " intrinsics, chosen by the folder's name";
+    } else {
+      std::ostringstream m;
+      m << folder.string() << ": no intrinsics.txt and no Freiburg sequence name: default intrinsics fx " << intrinsics_.fx << ", fy "
+        << intrinsics_.fy << ", cx " << intrinsics_.cx << ", cy " << intrinsics_.cy << " (give the camera's own with --intrinsics)";
+      warnings_.push_back(m.str());
+      intrinsics_source_ = "defaults";
+    }
   }
 }
 

@@ -272,19 +272,21 @@ TEST(Occlusion, SoftBandWidensWithDistance) {
 }
 
 /// Holes at a silhouette are the sensor's shadow on the background: they are filled from the far
-/// side. A near occluder (1 m) left of x = 32, a far wall (3 m) right of x = 34, no reading at
-/// x = 32 and 33: a virtual surface at 2 m shows through both hole columns. (The pixel at x = 32
-/// has 10 near and 5 far readings in its 5x5 window: a median would fill it near.)
+/// side. A near occluder (1 m) left of x = 32, a far wall (3 m) right of x = 33, no reading at
+/// x = 32 and 33 in rows 10-29 (40 pixels: a small hole, which is filled): a virtual surface at 2 m
+/// shows through both hole columns. (The pixel at x = 32 has 10 near and 5 far readings in its 5x5
+/// window: a median would fill it near, and hide the virtual surface.)
 TEST(Occlusion, HolesAtASilhouetteAreFilledFromTheFarSide) {
   DepthImage real = plane(3.0f);
   for (int y = 0; y < kH; ++y) {
     for (int x = 0; x < 32; ++x) real.depth_m[y * kW + x] = 1.0f;
-    real.depth_m[y * kW + 32] = real.depth_m[y * kW + 33] = 0.0f;
   }
+  for (int y = 10; y < 30; ++y) real.depth_m[y * kW + 32] = real.depth_m[y * kW + 33] = 0.0f;
   OcclusionOptions o;
   o.refine = false;
+  ASSERT_LT(40, o.max_hole_px) << "the hole must be one that is filled";
   const auto alpha = occlusion_alpha(real, uniform(128, 128, 128), std::vector<float>(kW * kH, 2.0f), o);
-  for (int y = 2; y < kH - 2; ++y) {
+  for (int y = 12; y < 28; ++y) {
     EXPECT_EQ(alpha[y * kW + 31], 0.0f) << "the occluder at row " << y;
     EXPECT_EQ(alpha[y * kW + 32], 1.0f) << "the hole next to the occluder, row " << y;
     EXPECT_EQ(alpha[y * kW + 33], 1.0f) << "the hole next to the wall, row " << y;

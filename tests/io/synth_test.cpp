@@ -133,6 +133,8 @@ class MemorySource : public ar::FrameSource {
   }
   void seek(int64_t i) override { cursor_ = static_cast<size_t>(i); }
   std::string describe() const override { return "memory"; }
+  double depth_units_per_metre() const override { return 1000.0; }
+  std::string intrinsics_source() const override { return "given"; }
 
  private:
   std::vector<ar::SensorFrame> frames_;

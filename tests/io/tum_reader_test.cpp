@@ -166,6 +166,38 @@ namespace artrace::io {
 namespace {
 
 /// Real TUM sequences, when the shared data holds any (../shared/data/rgbd/<sequence>/).
+/// The real fr1/rpy sequence (120 frames): colour paired with depth by the benchmark's rule and
+/// poses interpolated at the colour timestamps, against values worked out by an independent
+/// script (the associate.py rule, linear translation and slerp over groundtruth.txt).
+TEST(Tum, RealFr1RpyAssociationAndPosesAtColourTimes) {
+  ARTRACE_REQUIRE_SHARED("rgbd/tum-fr1-rpy/rgb.txt");
+  TumReader reader(shared_path.parent_path());
+  ASSERT_EQ(reader.frame_count().value(), 120);
+  EXPECT_TRUE(reader.warnings().empty());
+  EXPECT_DOUBLE_EQ(reader.intrinsics().fx, 517.3) << "Freiburg 1, by the folder's name";
+  struct Expected {
+    int frame;
+    double color_t, depth_t;
+    double t[3], q[4];  // translation, quaternion x y z w
+  };
+  const Expected cases[] = {
+      {0, 1305031229.528748, 1305031229.528784, {1.299434, 0.688089, 1.573890}, {0.681736, 0.551023, -0.015106, -0.481021}},
+      {59, 1305031231.493669, 1305031231.499244, {1.264395, 0.601647, 1.531367}, {0.612122, 0.661519, -0.429929, -0.053481}},
+      {119, 1305031233.493692, 1305031233.500736, {1.280482, 0.621070, 1.523776}, {0.697517, 0.623973, -0.186124, -0.299142}},
+  };
+  for (const Expected& e : cases) {
+    const ar::SensorFrame f = reader.read(e.frame);
+    EXPECT_NEAR(f.color_time_s, e.color_t, 1e-6) << "frame " << e.frame;
+    EXPECT_NEAR(f.depth_time_s, e.depth_t, 1e-6) << "frame " << e.frame;
+    ASSERT_TRUE(f.world_from_camera.has_value()) << "frame " << e.frame;
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(f.world_from_camera->translation()[a], e.t[a], 2e-6) << "frame " << e.frame;
+    const Eigen::Quaterniond q(f.world_from_camera->rotation());
+    const double sign = q.x() * e.q[0] + q.y() * e.q[1] + q.z() * e.q[2] + q.w() * e.q[3] < 0.0 ? -1.0 : 1.0;
+    const double got[4] = {q.x(), q.y(), q.z(), q.w()};
+    for (int a = 0; a < 4; ++a) EXPECT_NEAR(sign * got[a], e.q[a], 2e-6) << "frame " << e.frame << ": quaternion component " << a;
+  }
+}
+
 TEST(Tum, RealSequencesInSharedData) {
   ARTRACE_REQUIRE_SHARED("rgbd");
   int sequences = 0;

@@ -24,6 +24,11 @@ struct ColorImage {
 
 /// Depth in metres along the optical axis; 0 marks a pixel without a reading (the sensor saw
 /// nothing there, or the value was invalid): never a made-up value.
+/// Metres of a stored depth value: value / units_per_metre, divided in double and rounded once to
+/// float, so that one depth stored in any unit is the same float (1201 mm and 6005 TUM units both
+/// give 1.201f): recordings converted between formats keep their depths bit for bit.
+inline float depth_metres(uint32_t value, double units_per_metre) { return static_cast<float>(value / units_per_metre); }
+
 struct DepthImage {
   int width = 0;
   int height = 0;
@@ -60,6 +65,13 @@ class FrameSource {
   void rewind() { seek(0); }
   /// What the source reads, for messages and `artrace info`.
   virtual std::string describe() const = 0;
+  /// Stored depth units per metre (5000 in TUM folders, 1000 for millimetres).
+  virtual double depth_units_per_metre() const = 0;
+  /// Where the intrinsics come from (a file, the recording's own metadata, or defaults).
+  virtual std::string intrinsics_source() const = 0;
+  /// What the reader had to decide for the user at open (defaults used, frames skipped or
+  /// dropped, depth not registered): the tools print these.
+  virtual std::vector<std::string> warnings() const { return {}; }
 };
 
 }  // namespace artrace::ar

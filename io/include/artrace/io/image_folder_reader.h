@@ -1,7 +1,8 @@
 // Plain OpenCV sources: a folder holding depth/ (16-bit PNGs, `depth_per_metre` units, 1000 = mm by
 // default) and either color/ (images, any format OpenCV reads) or one colour video color.<ext>
 // (mp4, avi, mkv, mov). Frames pair by sorted file name / video order; frame k is at k / fps seconds.
-// Optional: trajectory.txt (TUM format, poses at those times) and intrinsics.txt (fx fy cx cy).
+// Optional: trajectory.txt (TUM format, poses at those times) and an intrinsics file (intrinsics_file.h;
+// without one, defaults with a warning).
 #pragma once
 
 #include "artrace/ar/sensor_frame.h"
@@ -10,6 +11,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
 namespace artrace::io {
@@ -18,6 +20,7 @@ struct ImageFolderOptions {
   double fps = 30.0;  ///< for image folders; a video's own rate wins
   double depth_per_metre = 1000.0;
   std::optional<ar::PinholeIntrinsics> intrinsics;
+  std::optional<std::filesystem::path> trajectory;  ///< else trajectory.txt when present
 };
 
 class ImageFolderReader : public ar::FrameSource {
@@ -29,6 +32,9 @@ class ImageFolderReader : public ar::FrameSource {
   bool next(ar::SensorFrame& frame) override;
   void seek(int64_t index) override;
   std::string describe() const override;
+  double depth_units_per_metre() const override { return options_.depth_per_metre; }
+  std::string intrinsics_source() const override { return intrinsics_source_; }
+  std::vector<std::string> warnings() const override { return warnings_; }
 
   /// True when `folder` looks like this layout.
   static bool accepts(const std::filesystem::path& folder);
@@ -42,6 +48,8 @@ class ImageFolderReader : public ar::FrameSource {
   std::unique_ptr<Video> video_;
   ar::Trajectory trajectory_;
   std::optional<ar::PinholeIntrinsics> intrinsics_;
+  std::string intrinsics_source_;
+  std::vector<std::string> warnings_;
   int64_t cursor_ = 0;
 };
 

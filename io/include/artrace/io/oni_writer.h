@@ -31,7 +31,9 @@ class OniWriter {
 
   /// Appends one frame of each stream at `timestamp_us` (increasing). depth: width x height u16 mm;
   /// rgb: width x height x 3 bytes.
-  void write(const uint16_t* depth_mm, const uint8_t* rgb, uint64_t timestamp_us);
+  void write(const uint16_t* depth_mm, const uint8_t* rgb, uint64_t timestamp_us) { write(depth_mm, rgb, timestamp_us, timestamp_us); }
+  /// The same with each stream's own timestamp (each stream's increasing), as sensors record them.
+  void write(const uint16_t* depth_mm, const uint8_t* rgb, uint64_t depth_us, uint64_t color_us);
   /// Seek tables, End record, header patched, file renamed into place.
   void close();
   uint32_t frames() const { return frames_; }
@@ -43,6 +45,7 @@ class OniWriter {
     uint64_t added_offset = 0;  ///< NodeAdded record
     uint64_t last_data = 0;     ///< previous NewData (undo chain)
     std::vector<uint64_t> data_offsets;
+    std::vector<uint64_t> timestamps;
     size_t frame_bytes = 0;
     uint32_t name_bytes = 0;
   };
@@ -59,8 +62,6 @@ class OniWriter {
   std::FILE* file_ = nullptr;
   Node depth_{1}, color_{2};
   uint32_t frames_ = 0;
-  uint64_t first_ts_ = 0, last_ts_ = 0;
-  std::vector<uint64_t> timestamps_;
 };
 
 }  // namespace artrace::io

@@ -2,7 +2,7 @@
 // rgb/ and depth/ PNG folders, read through OpenCV.
 //
 // What the reader does with messy recordings (decided here, tested in tum_reader_test.cpp):
-// - a listed image that does not exist: the frame is skipped with a warning on stderr;
+// - a listed image that does not exist: the frame is skipped with a warning (warnings());
 // - an image that exists but does not decode, or a depth PNG that is not 16-bit one-channel:
 //   io::ParseError naming the file when that frame is read;
 // - depth 0 and 65535 (saturated): no reading (0 in the frame);
@@ -68,6 +68,9 @@ class TumReader : public ar::FrameSource {
   bool next(ar::SensorFrame& frame) override;
   void seek(int64_t index) override;
   std::string describe() const override;
+  double depth_units_per_metre() const override { return options_.depth_scale; }
+  std::string intrinsics_source() const override { return intrinsics_source_; }
+  std::vector<std::string> warnings() const override { return warnings_; }
 
   const ar::PinholeIntrinsics& intrinsics() const { return intrinsics_; }
   const ar::Trajectory& trajectory() const { return trajectory_; }
@@ -81,6 +84,8 @@ class TumReader : public ar::FrameSource {
   std::filesystem::path folder_;
   TumOptions options_;
   ar::PinholeIntrinsics intrinsics_;
+  std::string intrinsics_source_;
+  std::vector<std::string> warnings_;
   ar::Trajectory trajectory_;
   std::vector<Entry> frames_;
   int64_t cursor_ = 0;
