@@ -37,6 +37,9 @@ struct Options {
 
 void run(const Options& opt) {
   const io::ArSceneFile scene_file = io::load_ar_scene(opt.scene);
+  for (const io::GltfModel& m : scene_file.loaded) {
+    for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  }
   io::ArRuntime runtime(scene_file);
   auto source = open_recording(opt.recording, opt.rec, opt.quiet);
   const int64_t count = source->frame_count().value_or(0);
@@ -64,6 +67,7 @@ void run(const Options& opt) {
   copt.shadows = !opt.no_shadows;
   copt.lights = runtime.lights();
   copt.ambient = runtime.ambient();
+  copt.alpha_tested = runtime.alpha_tested();
   copt.threads = opt.threads;
   g_interrupted = false;
   auto previous = std::signal(SIGINT, on_sigint);
@@ -95,7 +99,7 @@ void run(const Options& opt) {
       update_ms.push_back(runtime.update(f.color_time_s));
       copt.object_bounds = runtime.object_bounds();
       ar::CompositeStats st;
-      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const core::Hit& h) { return runtime.material(h); }, copt, &st);
+      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const ar::SurfaceQuery& q) { return runtime.material(q); }, copt, &st);
       proxy_ms.push_back(st.proxy_ms);
       trace_ms.push_back(st.trace_ms);
       shadow_ms.push_back(st.real_shadow_ms);

@@ -126,12 +126,46 @@ nlohmann::json info_gltf_model(const io::GltfModel& m) {
   nlohmann::json j;
   j["triangles"] = m.triangle_count();
   j["meshes"] = m.meshes.size();
-  j["materials"] = m.materials.size() - 1;
   j["nodes"] = m.nodes.size();
   j["skins"] = m.skins.size();
+  nlohmann::json textures = nlohmann::json::array();
+  for (const io::GltfImage& img : m.images) textures.push_back({{"image", img.name}, {"width", img.width}, {"height", img.height}});
+  j["textures"] = textures;
+  static const char* kAlpha[] = {"OPAQUE", "MASK", "BLEND"};
+  nlohmann::json materials = nlohmann::json::array();
+  for (size_t i = 1; i < m.materials.size(); ++i) {
+    const io::GltfMaterial& g = m.materials[i];
+    nlohmann::json mj{{"name", g.name},
+                      {"base_color", {g.base_color.r, g.base_color.g, g.base_color.b, g.alpha}},
+                      {"metallic", g.metallic},
+                      {"roughness", g.roughness},
+                      {"alpha_mode", kAlpha[static_cast<int>(g.alpha_mode)]},
+                      {"double_sided", g.double_sided}};
+    if (g.alpha_mode == io::AlphaMode::kMask) mj["alpha_cutoff"] = g.alpha_cutoff;
+    if (g.emissive != glm::vec3(0.0f)) mj["emissive"] = {g.emissive.r, g.emissive.g, g.emissive.b};
+    if (g.transmission > 0.0f) mj["transmission"] = g.transmission;
+    nlohmann::json maps = nlohmann::json::object();
+    const std::pair<const char*, const io::GltfTextureRef*> refs[] = {{"base_color", &g.base_color_texture},
+                                                                      {"metallic_roughness", &g.metallic_roughness_texture},
+                                                                      {"normal", &g.normal_texture},
+                                                                      {"occlusion", &g.occlusion_texture},
+                                                                      {"emissive", &g.emissive_texture}};
+    for (const auto& [name, t] : refs) {
+      if (t->valid()) maps[name] = {{"image", m.images[static_cast<size_t>(t->image)].name}, {"tex_coord", t->tex_coord}};
+    }
+    mj["maps"] = maps;
+    materials.push_back(mj);
+  }
+  j["materials"] = materials;
+  size_t targets = 0;
+  for (const io::GltfMesh& mesh : m.meshes) targets += mesh.targets.size();
+  j["morph_targets"] = targets;
   nlohmann::json anims = nlohmann::json::array();
   for (const io::GltfAnimation& a : m.animations) anims.push_back({{"name", a.name}, {"duration_s", a.duration_s}, {"channels", a.channels.size()}});
   j["animations"] = anims;
+  j["extensions_used"] = m.extensions_used;
+  j["extensions_required"] = m.extensions_required;
+  j["warnings"] = m.warnings;
   return j;
 }
 

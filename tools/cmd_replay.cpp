@@ -82,8 +82,12 @@ class Replay {
       : opt_(opt), scene_file_(io::load_ar_scene(opt.scene)), runtime_(scene_file_), source_(open_recording(opt.recording, opt.rec)) {
     count_ = source_->frame_count().value_or(0);
     if (count_ <= 0) throw std::runtime_error(opt.recording + ": no frames");
+    for (const io::GltfModel& m : scene_file_.loaded) {
+      for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+    }
     copt_.lights = runtime_.lights();
     copt_.ambient = runtime_.ambient();
+    copt_.alpha_tested = runtime_.alpha_tested();
     copt_.threads = opt.threads;
   }
 
@@ -231,7 +235,7 @@ class Replay {
     copt_.proxy = &proxy_;
     ar::CompositeStats st;
     const ar::ColorImage c =
-        ar::composite(frame_, runtime_.scene(), [&](const core::Hit& h) { return runtime_.material(h); }, copt_, &st);
+        ar::composite(frame_, runtime_.scene(), [&](const ar::SurfaceQuery& q) { return runtime_.material(q); }, copt_, &st);
     timing_.trace = st.trace_ms;
     timing_.composite = st.proxy_ms + st.real_shadow_ms + st.occlusion_ms + st.composite_ms;  // depth mesh, shadows on real surfaces, occlusion, blend
     cv::Mat img = to_bgr(c);

@@ -39,6 +39,19 @@ float light_passing(const core::TwoLevelScene& scene, const core::Ray& r) {
   return trans[0];
 }
 
+constexpr float kPi = 3.14159265358979f;
+/// Surfaces a ray walks past (cut-outs, blended layers) before it gives up.
+constexpr int kMaxLayers = 16;
+/// Below this roughness a metallic-roughness surface traces a mirror reflection, fading in to a
+/// perfect mirror at 0; above it the lights' GGX lobes and the ambient term stand for reflections.
+constexpr float kMirrorRoughness = 0.2f;
+
+/// A colour seen along a ray, premultiplied by how much of the ray the virtual surfaces cover.
+struct Sample {
+  glm::vec3 colour{0.0f};
+  float coverage = 0.0f;
+};
+
 struct Shader {
   const SensorFrame& frame;
   const core::TwoLevelScene& scene;
@@ -47,6 +60,39 @@ struct Shader {
   const std::vector<VirtualLight>& lights;
   const DepthProxy* proxy;  ///< null: no depth mesh
   core::Camera cam;
+  float pixel_spread;  ///< a pixel's angle (radians): the camera rays' cone spread
+
+  VirtualMaterial look(const core::Ray& r, const core::Hit& h, float path, bool shadow) const {
+    SurfaceQuery q;
+    static_cast<core::Hit&>(q) = h;
+    const float len = glm::length(r.dir);
+    q.dir = r.dir / len;
+    q.cone_width = (path + h.t * len) * pixel_spread;
+    q.shadow_ray = shadow;
+    return material(q);
+  }
+
+  /// The light passing along a shadow ray. With cut-outs and blended surfaces in the scene it walks
+  /// the surfaces: cut-out points let everything through, blended ones 1 - alpha, glass its
+  /// transmittance, anything else nothing.
+  float light_passing(const core::Ray& r) const {
+    if (!opt.alpha_tested) return artrace::ar::light_passing(scene, r);
+    float pass = 1.0f;
+    core::Ray s = r;
+    for (int k = 0; k < kMaxLayers; ++k) {
+      const core::Hit h = scene.intersect(s);
+      if (!h.valid()) return pass;
+      const VirtualMaterial m = look(s, h, 0.0f, true);
+      if (!m.cutout) {
+        if (m.kind == VirtualMaterial::kGlass) pass *= shadow_transmittance(m);
+        else if (m.alpha < 1.0f) pass *= 1.0f - std::max(m.alpha, 0.0f);
+        else return 0.0f;
+        if (pass <= 0.0f) return 0.0f;
+      }
+      s.tmin = h.t;
+    }
+    return 0.0f;
+  }
 
   /// The recorded colour seen along a ray that left the virtual objects where the depth mesh has
   /// nothing: the point 2 m (or 1 m, 0.5 m) on is looked up in the colour frame.
@@ -63,48 +109,114 @@ struct Shader {
     return glm::vec3(0.5f);
   }
 
-  glm::vec3 shade(const core::Ray& ray, const core::Hit& hit, int depth) const {
+  /// What a secondary ray (reflection, refraction) sees: the virtual surfaces in front of the
+  /// depth mesh, blended front to back, then the recorded colour.
+  glm::vec3 trace(const glm::vec3& o, const glm::vec3& dir, int depth, float path) const {
+    const core::Ray r{o, dir};
+    float t_real = core::kInfinity;
+    glm::vec3 real;
+    const bool real_hit = proxy && proxy->intersect(r, t_real, real);
+    const core::Hit h = scene.intersect(r);
+    if (h.valid() && (!real_hit || h.t <= t_real)) {
+      const Sample s = radiance(r, h, depth, path);
+      if (s.coverage >= 1.0f) return s.colour;
+      return s.colour + (1.0f - s.coverage) * (real_hit ? real : background(o, dir));
+    }
+    return real_hit ? real : background(o, dir);
+  }
+
+  /// Colour and coverage along `r`, whose closest hit is `h`: cut-out points are passed, blended
+  /// surfaces composited front to back (Porter & Duff's "over").
+  Sample radiance(core::Ray r, core::Hit h, int depth, float path) const {
+    Sample out;
+    float through = 1.0f;
+    for (int k = 0; k < kMaxLayers && h.valid(); ++k) {
+      const VirtualMaterial m = look(r, h, path, false);
+      if (!m.cutout) {
+        const float a = std::clamp(m.alpha, 0.0f, 1.0f);
+        if (a > 0.0f) out.colour += through * a * shade(r, h, m, depth, path);
+        through *= 1.0f - a;
+        if (through <= 1e-3f) break;
+      }
+      if (!opt.alpha_tested) break;
+      r.tmin = h.t;
+      h = scene.intersect(r);
+    }
+    out.coverage = 1.0f - (through <= 1e-3f ? 0.0f : through);
+    return out;
+  }
+
+  glm::vec3 shade(const core::Ray& ray, const core::Hit& hit, const VirtualMaterial& m, int depth, float path) const {
     const core::Triangle tri = scene.world_triangle(hit);
-    glm::vec3 n = glm::normalize(tri.geometric_normal());
-    const bool front = glm::dot(n, ray.dir) < 0.0f;
-    if (!front) n = -n;
+    glm::vec3 ng = glm::normalize(tri.geometric_normal());
+    const bool front = glm::dot(ng, ray.dir) < 0.0f;
+    if (!front) ng = -ng;
+    glm::vec3 n = ng;
+    if (m.normal != glm::vec3(0.0f)) {
+      n = glm::normalize(m.normal);
+      if (glm::dot(n, ng) < 0.0f) n = -n;  // the side the ray comes from, as the geometric normal
+    }
     const glm::vec3 p = tri.v0 * (1.0f - hit.u - hit.v) + tri.v1 * hit.u + tri.v2 * hit.v;
     const float magnitude = max_coord(tri);
-    const VirtualMaterial m = material(hit);
-    if (m.kind == VirtualMaterial::kDiffuse || depth >= 2) {
-      glm::vec3 c = opt.ambient * m.color;
-      for (const VirtualLight& l : lights) {
-        const glm::vec3 to = l.position - p;
-        const float cosine = glm::dot(n, glm::normalize(to));
-        if (cosine <= 0.0f) continue;
-        float pass = 1.0f;
-        if (opt.shadows) {
-          const glm::vec3 o = core::offset_ray_origin(p, n, magnitude);
-          pass = light_passing(scene, core::Ray{o, l.position - o, 0.0f, 1.0f});
-          if (pass <= 0.0f) continue;
-        }
-        c += m.color * l.color * (cosine * pass);
-      }
-      return c;
-    }
     const glm::vec3 d = glm::normalize(ray.dir);
-    auto trace = [&](const glm::vec3& o, const glm::vec3& dir) {
-      const core::Ray r{o, dir};
-      const core::Hit h = scene.intersect(r);
-      float t_real;
-      glm::vec3 real;
-      if (proxy && proxy->intersect(r, t_real, real) && (!h.valid() || t_real < h.t)) return real;
-      return h.valid() ? shade(r, h, depth + 1) : background(o, dir);
+    const float here = path + hit.t * glm::length(ray.dir);
+    // light reaching p from each light, past the virtual objects
+    auto lit = [&](const VirtualLight& l, float& cosine) {
+      const glm::vec3 to = glm::normalize(l.position - p);
+      cosine = glm::dot(n, to);
+      if (cosine <= 0.0f || glm::dot(ng, to) <= 0.0f) return 0.0f;
+      if (!opt.shadows) return 1.0f;
+      const glm::vec3 o = core::offset_ray_origin(p, ng, magnitude);
+      return light_passing(core::Ray{o, l.position - o, 0.0f, 1.0f});
     };
-    const glm::vec3 reflected = trace(core::offset_ray_origin(p, n, magnitude), glm::reflect(d, n));
-    if (m.kind == VirtualMaterial::kMirror) return m.color * reflected;
+    if ((m.kind == VirtualMaterial::kDiffuse && !m.pbr) || depth >= 2) {
+      glm::vec3 c = opt.ambient * m.occlusion * m.color;
+      for (const VirtualLight& l : lights) {
+        float cosine;
+        const float pass = lit(l, cosine);
+        if (pass > 0.0f) c += m.color * l.color * (cosine * pass);
+      }
+      return c + m.emissive;
+    }
+    if (m.kind == VirtualMaterial::kDiffuse) {
+      // metallic-roughness
+      const glm::vec3 v = -d;
+      const float nv = std::max(glm::dot(n, v), 1e-4f);
+      const glm::vec3 f0 = glm::mix(glm::vec3(0.04f), m.color, m.metallic);
+      const glm::vec3 diffuse = m.color * (1.0f - m.metallic);
+      const float a = std::max(m.roughness, 0.03f) * std::max(m.roughness, 0.03f), a2 = a * a, k = 0.5f * a;
+      auto fresnel = [&](float cosine) { return f0 + (glm::vec3(1.0f) - f0) * std::pow(1.0f - std::clamp(cosine, 0.0f, 1.0f), 5.0f); };
+      const float mirror = std::clamp(1.0f - m.roughness / kMirrorRoughness, 0.0f, 1.0f);
+      glm::vec3 c = opt.ambient * m.occlusion * (diffuse + (1.0f - mirror) * f0);
+      if (mirror > 0.0f) {
+        const glm::vec3 reflected = trace(core::offset_ray_origin(p, ng, magnitude), glm::reflect(d, n), depth + 1, here);
+        c += mirror * fresnel(nv) * reflected;
+      }
+      for (const VirtualLight& l : lights) {
+        float nl;
+        const float pass = lit(l, nl);
+        if (pass <= 0.0f) continue;
+        const glm::vec3 h = glm::normalize(glm::normalize(l.position - p) + v);
+        const float nh = std::max(glm::dot(n, h), 0.0f), vh = std::max(glm::dot(v, h), 0.0f);
+        const float den = nh * nh * (a2 - 1.0f) + 1.0f;
+        const float D = a2 / (kPi * den * den);
+        const float G = nl / (nl * (1.0f - k) + k) * nv / (nv * (1.0f - k) + k);
+        const glm::vec3 F = fresnel(vh);
+        // radiance for a light of the Lambert convention above (diffuse: base * light * cos)
+        const glm::vec3 specular = kPi * D * G * F / (4.0f * nl * nv);
+        c += l.color * (pass * nl) * (diffuse * (glm::vec3(1.0f) - F) + specular);
+      }
+      return c + m.emissive;
+    }
+    const glm::vec3 reflected = trace(core::offset_ray_origin(p, ng, magnitude), glm::reflect(d, n), depth + 1, here);
+    if (m.kind == VirtualMaterial::kMirror) return m.color * reflected + m.emissive;
     // glass: Fresnel between reflection and refraction; total internal reflection reflects all
     const float eta = front ? 1.0f / m.ior : m.ior;
     const float fresnel = core::fresnel_dielectric(-glm::dot(d, n), eta);
     glm::vec3 refr_dir;
     if (!core::refract_direction(d, n, eta, refr_dir)) return reflected;
-    const glm::vec3 refracted = trace(core::offset_ray_origin(p, -n, magnitude), refr_dir);
-    return fresnel * reflected + (1.0f - fresnel) * m.color * refracted;
+    const glm::vec3 refracted = trace(core::offset_ray_origin(p, -ng, magnitude), refr_dir, depth + 1, here);
+    return fresnel * reflected + (1.0f - fresnel) * m.color * refracted + m.emissive;
   }
 };
 
@@ -174,9 +286,12 @@ Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, 
 /// nothing. The depth mesh tells, from kRealSkip off the point: the mesh is coarser than the depth
 /// map and as noisy as the sensor, so it is not asked about the point's own surface.
 constexpr float kRealSkip = 0.1f;
-const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const core::TwoLevelScene& scene,
-                                           const DepthProxy* proxy, const std::vector<VirtualLight>& lights,
-                                           const core::Camera& cam, const CompositeOptions& opt, CompositeStats& st) {
+const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const Shader& shader, const DepthProxy* proxy,
+                                                  CompositeStats& st) {
+  const core::TwoLevelScene& scene = shader.scene;
+  const std::vector<VirtualLight>& lights = shader.lights;
+  const core::Camera& cam = shader.cam;
+  const CompositeOptions& opt = shader.opt;
   const int w = frame.depth.width, h = frame.depth.height;
   // per-thread scratch kept across frames: no fresh megabytes (and page faults) every frame
   // (taken by reference here: inside the tile lambda a thread_local name would be the worker's own)
@@ -257,7 +372,7 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
             ++local_rays;
             const glm::vec3 side = glm::dot(n, n) > 0.0f ? n : to / dist;
             const glm::vec3 o = core::offset_ray_origin(p, side);
-            pass = light_passing(scene, core::Ray{o, l.position - o, 0.0f, 1.0f});
+            pass = shader.light_passing(core::Ray{o, l.position - o, 0.0f, 1.0f});
           }
           if (pass < 1.0f && proxy && !proxy->empty() && dist > kRealSkip) {
             const glm::vec3 l_dir = to / dist;
@@ -345,7 +460,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     proxy = opt.proxy ? opt.proxy : &local_proxy;
     st.proxy_ms = proxy->update(frame);
   }
-  Shader shader{frame, scene, material, opt, lights, opt.real_reflections ? proxy : nullptr, cam};
+  const Shader shader{frame, scene, material, opt, lights, opt.real_reflections ? proxy : nullptr, cam,
+                      static_cast<float>(1.0 / std::max(1e-6, frame.color_intrinsics.fx))};
 
   // Screen rectangle of the virtual objects' bounds: only those tiles are traced.
   int x0 = 0, y0 = 0, x1 = w, y1 = h;
@@ -379,7 +495,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const std::vector<glm::vec3>* shadow_ptr = nullptr;
   if (opt.shadows && opt.real_shadows && have_depth) {
     const auto ts = std::chrono::steady_clock::now();
-    shadow_ptr = &real_shadow_factors(frame, scene, proxy, lights, cam, opt, st);
+    shadow_ptr = &real_shadow_factors(frame, shader, proxy, st);
     st.real_shadow_ms = ms_since(ts);
     const std::vector<glm::vec3>& shadow = *shadow_ptr;
     if (st.shadowed_real_pixels > 0) {
@@ -397,7 +513,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   auto t0 = std::chrono::steady_clock::now();
   const int rw = x1 - x0, rh = y1 - y0;
   std::vector<float> zv(static_cast<size_t>(w) * h, std::numeric_limits<float>::infinity());
-  std::vector<glm::vec3> colour(static_cast<size_t>(w) * h);
+  std::vector<glm::vec3> colour(static_cast<size_t>(w) * h);  // premultiplied by coverage
+  std::vector<float> coverage(static_cast<size_t>(w) * h, 0.0f);
   core::for_each_tile(rw, rh, opt.threads, [&](const core::Tile& t) {
     core::RayPacket rays;
     core::HitPacket hits;
@@ -413,8 +530,22 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
         for (int i = 0; i < core::kPacketSize; ++i) {
           if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
           const size_t idx = static_cast<size_t>(y0 + y + i / 4) * w + (x0 + x + i % 4);
-          zv[idx] = hits.t[i];  // camera-space z = 1: t is the depth
-          colour[idx] = shader.shade(rays.get(i), hits.get(i), 0);
+          const core::Ray r = rays.get(i);
+          core::Hit hit = hits.get(i);
+          const Sample smp = shader.radiance(r, hit, 0, 0.0f);
+          if (smp.coverage <= 0.0f) continue;  // cut out all along
+          if (opt.alpha_tested) {
+            // the occlusion test takes the first surface that is not cut out
+            core::Ray next = r;
+            for (int k = 0; k < kMaxLayers && hit.valid() && shader.look(next, hit, 0.0f, false).cutout; ++k) {
+              next.tmin = hit.t;
+              hit = scene.intersect(next);
+            }
+            if (!hit.valid()) continue;
+          }
+          zv[idx] = hit.t;  // camera-space z = 1: t is the depth
+          colour[idx] = smp.colour;
+          coverage[idx] = smp.coverage;
         }
       }
     }
@@ -457,7 +588,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       if (alpha[i] <= 0.0f) continue;
       for (int c = 0; c < 3; ++c) {
         const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow_ptr ? (*shadow_ptr)[i][c] : 1.0f);
-        out.rgb[3 * i + c] = core::linear_to_srgb8(alpha[i] * colour[i][c] + (1.0f - alpha[i]) * real);
+        // the virtual colour over the real one by its coverage, then by the occlusion's alpha
+        out.rgb[3 * i + c] = core::linear_to_srgb8(real + alpha[i] * (colour[i][c] - coverage[i] * real));
       }
     }
   }

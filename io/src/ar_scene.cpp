@@ -120,7 +120,7 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
       }
       if (m.contains("material")) {
         const json& mat = m["material"];
-        c.keys(mat, at + ".material", {"kind", "base_color", "ior"});
+        c.keys(mat, at + ".material", {"kind", "base_color", "ior", "metallic", "roughness"});
         if (mat.contains("kind")) {
           const std::string k = c.string(mat["kind"], at + ".material.kind");
           if (k == "diffuse") p.kind = SurfaceKind::kDiffuse;
@@ -130,6 +130,8 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
         }
         if (mat.contains("base_color")) p.base_color = c.vec3(mat["base_color"], at + ".material.base_color");
         if (mat.contains("ior")) p.ior = c.number(mat["ior"], at + ".material.ior");
+        if (mat.contains("metallic")) p.metallic = c.number(mat["metallic"], at + ".material.metallic");
+        if (mat.contains("roughness")) p.roughness = c.number(mat["roughness"], at + ".material.roughness");
       }
       out.models.push_back(p);
       out.loaded.push_back(std::move(model));
@@ -155,53 +157,91 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
 
 namespace artrace::io {
 
+namespace {
+
+/// A mesh's morph weights are animated by the placement's clip.
+bool weights_animated(const GltfModel& model, int clip, int node) {
+  if (clip < 0 || clip >= static_cast<int>(model.animations.size())) return false;
+  for (const GltfChannel& c : model.animations[static_cast<size_t>(clip)].channels) {
+    if (c.path == GltfChannel::kWeights && c.node == node) return true;
+  }
+  return false;
+}
+
+glm::mat3 normal_matrix(const glm::mat4& m) { return glm::transpose(glm::inverse(glm::mat3(m))); }
+
+}  // namespace
+
 ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
   std::vector<core::Triangle> fixed;
   std::vector<float> fixed_pass;  // the static triangles' transmittance (glass lets light through)
   bool glass = false;
   static_bounds_.resize(file.models.size());
+  textures_.resize(file.models.size());
   for (size_t p = 0; p < file.models.size(); ++p) {
     const GltfModel& model = file.loaded[p];
     const ArModelPlacement& place = file.models[p];
+    // every image twice, as data (linear) and as colour (sRGB), built when a material uses it so
+    std::vector<ar::Texture>& tex = textures_[p];
+    tex.resize(2 * model.images.size());
+    for (const GltfMaterial& g : model.materials) {
+      auto need = [&](const GltfTextureRef& t, bool srgb) {
+        if (!t.valid()) return;
+        ar::Texture& slot = tex[2 * static_cast<size_t>(t.image) + (srgb ? 1 : 0)];
+        if (slot.levels() > 0) return;
+        const GltfImage& img = model.images[static_cast<size_t>(t.image)];
+        slot = ar::Texture(img.width, img.height, img.rgba, srgb);
+      };
+      need(g.base_color_texture, true);
+      need(g.emissive_texture, true);
+      need(g.metallic_roughness_texture, false);
+      need(g.normal_texture, false);
+      need(g.occlusion_texture, false);
+      alpha_tested_ = alpha_tested_ || g.alpha_mode != AlphaMode::kOpaque;
+    }
     const bool animated = place.clip >= 0 && place.clip < static_cast<int>(model.animations.size());
     const std::vector<glm::mat4> rest = model.node_transforms(-1, 0.0f);
+    const std::vector<std::vector<float>> rest_weights = model.node_weights(-1, 0.0f);
     std::vector<core::MeshHandle> meshes(model.meshes.size());
     for (size_t n = 0; n < model.nodes.size(); ++n) {
       const int mesh = model.nodes[n].mesh;
-      if (mesh < 0 || model.meshes[mesh].tris.empty()) continue;
-      const GltfMesh& gm = model.meshes[mesh];
-      if (model.nodes[n].skin >= 0) {
-        // a deforming mesh: skinned on every update
+      if (mesh < 0 || model.meshes[static_cast<size_t>(mesh)].tris.empty()) continue;
+      const GltfMesh& gm = model.meshes[static_cast<size_t>(mesh)];
+      const bool morphing = gm.morphed() && weights_animated(model, place.clip, static_cast<int>(n));
+      if (model.nodes[n].skin >= 0 || morphing) {
+        // a deforming mesh: its vertices recomputed on every update
         core::TriangleMesh tm;
         tm.positions = gm.positions;
         tm.indices = gm.indices;
         const core::DeformableHandle h = scene_.add_deformable(std::move(tm));
         if (std::vector<float> pass = glass_pass(p, mesh); !pass.empty()) scene_.set_deformable_transmittance(h, std::move(pass));
-        if (skinned_.size() <= h.index) skinned_.resize(h.index + 1);
-        skinned_[h.index] = Skinned{p, static_cast<int>(n), mesh, model.nodes[n].skin, h};
+        if (deforming_.size() <= h.index) deforming_.resize(h.index + 1);
+        deforming_[h.index] = Deforming{p, static_cast<int>(n), mesh, model.nodes[n].skin, h, {}};
       } else if (!animated) {
-        // static: into the kd-tree, in world space
+        // static: into the kd-tree, in world space (morph targets at the node's weights)
         const glm::mat4 m = place.world_from_model() * rest[n];
         const std::vector<float> pass = glass_pass(p, mesh);
         glass = glass || !pass.empty();
-        for (uint32_t t = 0; t < gm.tris.size(); ++t) {
-          const core::Triangle& tri = gm.tris[t];
-          fixed.push_back({glm::vec3(m * glm::vec4(tri.v0, 1.0f)), glm::vec3(m * glm::vec4(tri.v1, 1.0f)),
-                           glm::vec3(m * glm::vec4(tri.v2, 1.0f))});
-          for (const glm::vec3& v : {fixed.back().v0, fixed.back().v1, fixed.back().v2}) static_bounds_[p].extend(v);
-          static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t});
+        const std::vector<glm::vec3> v = gm.morphed() ? model.morphed_positions(mesh, rest_weights[n]) : gm.positions;
+        const uint32_t xform = static_cast<uint32_t>(static_xforms_.size());
+        static_xforms_.push_back(m);
+        for (uint32_t t = 0; t < gm.indices.size(); ++t) {
+          const glm::uvec3& i = gm.indices[t];
+          fixed.push_back({glm::vec3(m * glm::vec4(v[i.x], 1.0f)), glm::vec3(m * glm::vec4(v[i.y], 1.0f)), glm::vec3(m * glm::vec4(v[i.z], 1.0f))});
+          for (const glm::vec3& w : {fixed.back().v0, fixed.back().v1, fixed.back().v2}) static_bounds_[p].extend(w);
+          static_parts_.push_back({static_cast<uint32_t>(p), static_cast<uint32_t>(mesh), t, xform});
           fixed_pass.push_back(pass.empty() ? 0.0f : pass[t]);
         }
       } else {
         // hierarchically transformed: an instance of the mesh, moved by the node animation
-        if (meshes[mesh].index == core::kInvalidId) {
-          meshes[mesh] = scene_.add_rigid_mesh(gm.tris);
-          if (std::vector<float> pass = glass_pass(p, mesh); !pass.empty()) scene_.set_mesh_transmittance(meshes[mesh], std::move(pass));
+        if (meshes[static_cast<size_t>(mesh)].index == core::kInvalidId) {
+          meshes[static_cast<size_t>(mesh)] = scene_.add_rigid_mesh(gm.tris);
+          if (std::vector<float> pass = glass_pass(p, mesh); !pass.empty()) scene_.set_mesh_transmittance(meshes[static_cast<size_t>(mesh)], std::move(pass));
         }
-        const core::InstanceHandle h = scene_.add_instance(meshes[mesh], glm::mat4(1.0f));
+        const core::InstanceHandle h = scene_.add_instance(meshes[static_cast<size_t>(mesh)], glm::mat4(1.0f));
         if (parts_.size() <= h.index) parts_.resize(h.index + 1);
         core::Aabb box;
-        for (const glm::vec3& v : gm.positions) box.extend(v);
+        for (const core::Triangle& t : gm.tris) box.extend(core::Aabb::of(t));
         parts_[h.index] = Part{p, static_cast<int>(n), mesh, h, box};
       }
     }
@@ -214,71 +254,206 @@ ArRuntime::ArRuntime(const ArSceneFile& file) : file_(file) {
 double ArRuntime::update(double time_s) {
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<std::vector<glm::mat4>> nodes(file_.models.size());
+  std::vector<std::vector<std::vector<float>>> weights(file_.models.size());
   for (size_t p = 0; p < file_.models.size(); ++p) {
     const ArModelPlacement& m = file_.models[p];
-    nodes[p] = file_.loaded[p].node_transforms(m.clip, static_cast<float>(time_s * m.speed));
+    const float t = static_cast<float>(time_s * m.speed);
+    nodes[p] = file_.loaded[p].node_transforms(m.clip, t);
+    weights[p] = file_.loaded[p].node_weights(m.clip, t);
   }
   bounds_ = static_bounds_;
   for (const Part& part : parts_) {
     if (part.mesh < 0) continue;
-    const glm::mat4 m = file_.models[part.placement].world_from_model() * nodes[part.placement][part.node];
+    const glm::mat4 m = file_.models[part.placement].world_from_model() * nodes[part.placement][static_cast<size_t>(part.node)];
     scene_.set_transform(part.instance, m);
     bounds_[part.placement].extend(core::transform_box(part.object_box, m));  // no pass over the triangles
   }
-  for (const Skinned& s : skinned_) {
+  for (Deforming& s : deforming_) {
     if (s.mesh < 0) continue;
-    const glm::mat4 world = file_.models[s.placement].world_from_model();
-    const std::vector<glm::vec3> v = file_.loaded[s.placement].skinned_positions(s.mesh, s.skin, nodes[s.placement]);
+    const GltfModel& model = file_.loaded[s.placement];
+    const GltfMesh& gm = model.meshes[static_cast<size_t>(s.mesh)];
+    std::vector<glm::vec3> normals;
+    std::vector<glm::vec3> v = gm.morphed() ? model.morphed_positions(s.mesh, weights[s.placement][static_cast<size_t>(s.node)], &normals) : gm.positions;
+    if (!gm.morphed()) normals = gm.normals;
+    // skinned: the skin's joints place it (the node's own transform does not apply); morphed only:
+    // the node's transform
+    glm::mat4 world = file_.models[s.placement].world_from_model();
+    if (s.skin >= 0) v = model.skinned_positions(s.mesh, s.skin, nodes[s.placement], &v, &normals);
+    else world = world * nodes[s.placement][static_cast<size_t>(s.node)];
+    const glm::mat3 nm = normal_matrix(world);
     core::DeformableMesh& d = scene_.deformable(s.handle);
     for (size_t i = 0; i < v.size(); ++i) {
       d.positions()[i] = glm::vec3(world * glm::vec4(v[i], 1.0f));
       bounds_[s.placement].extend(d.positions()[i]);
     }
+    s.normals.resize(normals.size());
+    for (size_t i = 0; i < normals.size(); ++i) s.normals[i] = nm * normals[i];
     d.restructure();
   }
   scene_.commit();
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-ar::VirtualMaterial ArRuntime::material(const core::Hit& hit) const {
+namespace {
+
+/// A texture reference's coordinates at barycentrics (w0, w1, w2) of triangle `i`, transformed,
+/// with the transformed coordinate area of the triangle (for the level of detail).
+glm::vec2 tex_coords(const GltfMesh& gm, const GltfTextureRef& t, const glm::uvec3& i, float w0, float w1, float w2, float* area) {
+  const std::vector<glm::vec2>& uv = gm.uv[t.tex_coord];
+  if (uv.empty()) {
+    if (area) *area = 0.0f;
+    return glm::vec2(0.0f);
+  }
+  const glm::vec2 a = glm::vec2(t.transform * glm::vec3(uv[i.x], 1.0f)), b = glm::vec2(t.transform * glm::vec3(uv[i.y], 1.0f)),
+                  c = glm::vec2(t.transform * glm::vec3(uv[i.z], 1.0f));
+  if (area) {
+    const glm::vec2 e1 = b - a, e2 = c - a;
+    *area = 0.5f * std::fabs(e1.x * e2.y - e1.y * e2.x);
+  }
+  return w0 * a + w1 * b + w2 * c;
+}
+
+}  // namespace
+
+ar::VirtualMaterial ArRuntime::material(const ar::SurfaceQuery& hit) const {
+  size_t placement;
+  int mesh;
+  uint32_t triangle;
+  const glm::mat4* xform = nullptr;       // world from mesh (static parts)
+  const std::vector<glm::vec3>* normals_world = nullptr;  // deforming meshes
   if (hit.inst == core::kStaticObject) {
     const StaticTriangle& s = static_parts_.at(hit.prim);
-    return material_of(s.placement, static_cast<int>(s.mesh), s.triangle);
+    placement = s.placement;
+    mesh = static_cast<int>(s.mesh);
+    triangle = s.triangle;
+    xform = &static_xforms_[s.xform];
+  } else if (hit.inst & 0x80000000u) {
+    const Deforming& s = deforming_.at(hit.inst & 0x7fffffffu);
+    placement = s.placement;
+    mesh = s.mesh;
+    triangle = hit.prim;
+    normals_world = &s.normals;
+  } else {
+    const Part& part = parts_.at(hit.inst);
+    placement = part.placement;
+    mesh = part.mesh;
+    triangle = hit.prim;
   }
-  if (hit.inst & 0x80000000u) {
-    const Skinned& s = skinned_.at(hit.inst & 0x7fffffffu);
-    return material_of(s.placement, s.mesh, hit.prim);
+  ar::VirtualMaterial m = triangle_material(placement, mesh, triangle);
+  const GltfModel& model = file_.loaded[placement];
+  const GltfMesh& gm = model.meshes[static_cast<size_t>(mesh)];
+  const GltfMaterial& g = model.materials[gm.material[triangle]];
+  const ArModelPlacement& place = file_.models[placement];
+  const glm::uvec3 i = gm.indices[triangle];
+  const float w0 = 1.0f - hit.u - hit.v, w1 = hit.u, w2 = hit.v;
+  const std::vector<ar::Texture>& tex = textures_[placement];
+  // shadow rays need only what decides how much light passes: coverage
+  const bool full = !hit.shadow_ray;
+  const core::Triangle wt = scene_.world_triangle(hit);
+  const glm::vec3 ng = glm::cross(wt.v1 - wt.v0, wt.v2 - wt.v0);
+  const float world_area = 0.5f * glm::length(ng);
+  const float cosine = world_area > 0.0f ? glm::dot(ng, hit.dir) / (2.0f * world_area) : 1.0f;
+  auto sample = [&](const GltfTextureRef& t, bool srgb) {
+    float uv_area = 0.0f;
+    const glm::vec2 uv = tex_coords(gm, t, i, w0, w1, w2, &uv_area);
+    const ar::Texture& tx = tex[2 * static_cast<size_t>(t.image) + (srgb ? 1 : 0)];
+    return tx.sample(t.sampler, uv, ar::texture_lod(tx, uv_area, world_area, hit.cone_width, cosine));
+  };
+  float alpha = g.alpha;
+  if (!gm.colors.empty()) {
+    const glm::vec4 c = w0 * gm.colors[i.x] + w1 * gm.colors[i.y] + w2 * gm.colors[i.z];
+    if (!place.base_color) m.color *= glm::vec3(c);
+    alpha *= c.a;
   }
-  const Part& part = parts_.at(hit.inst);
-  return material_of(part.placement, part.mesh, hit.prim);
+  if (g.base_color_texture.valid() && (!place.base_color || g.alpha_mode != AlphaMode::kOpaque)) {
+    const glm::vec4 c = sample(g.base_color_texture, true);
+    if (!place.base_color) m.color *= glm::vec3(c);
+    alpha *= c.a;
+  }
+  if (g.alpha_mode == AlphaMode::kMask) m.cutout = alpha < g.alpha_cutoff;
+  else if (g.alpha_mode == AlphaMode::kBlend) m.alpha = alpha;
+  if (!full || m.cutout) return m;
+  if (g.metallic_roughness_texture.valid()) {
+    const glm::vec4 c = sample(g.metallic_roughness_texture, false);
+    if (!place.roughness) m.roughness *= c.g;
+    if (!place.metallic) m.metallic *= c.b;
+  }
+  if (g.occlusion_texture.valid()) m.occlusion = 1.0f + g.occlusion_texture.scale * (sample(g.occlusion_texture, false).r - 1.0f);
+  if (g.emissive_texture.valid()) m.emissive *= glm::vec3(sample(g.emissive_texture, true));
+  // the shading normal: interpolated vertex normals, bent by the normal map
+  glm::vec3 n(0.0f);
+  if (normals_world) {
+    if (!normals_world->empty()) n = w0 * (*normals_world)[i.x] + w1 * (*normals_world)[i.y] + w2 * (*normals_world)[i.z];
+  } else if (!gm.normals.empty()) {
+    const glm::vec3 local = w0 * gm.normals[i.x] + w1 * gm.normals[i.y] + w2 * gm.normals[i.z];
+    n = xform ? normal_matrix(*xform) * local : scene_.normal_to_world(hit) * local;
+  }
+  if (g.normal_texture.valid() && !gm.uv[g.normal_texture.tex_coord].empty()) {
+    const glm::vec3 geo = glm::normalize(ng);
+    glm::vec3 nn = n == glm::vec3(0.0f) ? geo : glm::normalize(n);
+    // tangent frame: TANGENT where given (and the mesh is not deforming), else from the texture
+    // coordinates' derivatives over the world triangle
+    glm::vec3 t(0.0f);
+    float sign = 1.0f;
+    if (!gm.tangents.empty() && !normals_world) {
+      const glm::vec4 tl = w0 * gm.tangents[i.x] + w1 * gm.tangents[i.y] + w2 * gm.tangents[i.z];
+      const glm::mat4 to_world = xform ? *xform : scene_.world_from_object(hit);
+      t = glm::mat3(to_world) * glm::vec3(tl);
+      sign = tl.w < 0.0f ? -1.0f : 1.0f;
+    } else {
+      const std::vector<glm::vec2>& uv = gm.uv[g.normal_texture.tex_coord];
+      const glm::vec2 d1 = uv[i.y] - uv[i.x], d2 = uv[i.z] - uv[i.x];
+      const glm::vec3 e1 = wt.v1 - wt.v0, e2 = wt.v2 - wt.v0;
+      const float det = d1.x * d2.y - d2.x * d1.y;
+      if (det != 0.0f) {
+        t = (e1 * d2.y - e2 * d1.y) / det;
+        const glm::vec3 b = (e2 * d1.x - e1 * d2.x) / det;
+        sign = glm::dot(glm::cross(nn, t), b) < 0.0f ? -1.0f : 1.0f;
+      }
+    }
+    t -= nn * glm::dot(nn, t);
+    if (glm::dot(t, t) > 0.0f) {
+      t = glm::normalize(t);
+      const glm::vec3 b = sign * glm::cross(nn, t);
+      const glm::vec3 c = 2.0f * glm::vec3(sample(g.normal_texture, false)) - 1.0f;
+      const glm::vec3 ts(c.x * g.normal_texture.scale, c.y * g.normal_texture.scale, c.z);
+      n = ts.x * t + ts.y * b + ts.z * nn;
+    }
+  }
+  m.normal = n;
+  return m;
 }
 
 std::vector<float> ArRuntime::glass_pass(size_t placement, int mesh) const {
-  const size_t n = file_.loaded[placement].meshes.at(static_cast<size_t>(mesh)).tris.size();
+  const size_t n = file_.loaded[placement].meshes.at(static_cast<size_t>(mesh)).indices.size();
   std::vector<float> pass(n);
   bool any = false;
   for (uint32_t t = 0; t < n; ++t) {
-    pass[t] = ar::shadow_transmittance(material_of(placement, mesh, t));
+    pass[t] = ar::shadow_transmittance(triangle_material(placement, mesh, t));
     any = any || pass[t] > 0.0f;
   }
   if (!any) pass.clear();
   return pass;
 }
 
-ar::VirtualMaterial ArRuntime::material_of(size_t placement, int mesh, uint32_t triangle) const {
+ar::VirtualMaterial ArRuntime::triangle_material(size_t placement, int mesh, uint32_t triangle) const {
   const ArModelPlacement& place = file_.models[placement];
   const GltfModel& model = file_.loaded[placement];
   const GltfMaterial& g = model.materials[model.meshes.at(static_cast<size_t>(mesh)).material.at(triangle)];
   ar::VirtualMaterial m;
   m.color = place.base_color.value_or(g.base_color);
   m.ior = place.ior.value_or(g.ior);
-  SurfaceKind kind = SurfaceKind::kDiffuse;
-  if (g.transmission > 0.5f) kind = SurfaceKind::kGlass;
-  else if (g.metallic > 0.5f && g.roughness < 0.3f) kind = SurfaceKind::kMirror;
+  m.pbr = g.pbr;
+  m.metallic = place.metallic.value_or(g.metallic);
+  m.roughness = place.roughness.value_or(g.roughness);
+  m.emissive = g.emissive;
+  SurfaceKind kind = g.transmission > 0.5f ? SurfaceKind::kGlass : SurfaceKind::kDiffuse;
   kind = place.kind.value_or(kind);
   m.kind = kind == SurfaceKind::kGlass ? ar::VirtualMaterial::kGlass
            : kind == SurfaceKind::kMirror ? ar::VirtualMaterial::kMirror
                                           : ar::VirtualMaterial::kDiffuse;
+  if (place.kind == SurfaceKind::kDiffuse && !place.metallic && !place.roughness) m.pbr = false;  // "diffuse": Lambert
+  if (place.metallic || place.roughness) m.pbr = true;
   return m;
 }
 

@@ -3,57 +3,175 @@
 
 #include <tiny_gltf.h>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
 #include <limits>
+#include <set>
 #include <sstream>
 
 namespace artrace::io {
 namespace {
 
-/// Reads accessor `index` as `comps` floats per element (normalised integers converted).
-std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, const std::string& file) {
-  if (index < 0 || index >= static_cast<int>(m.accessors.size())) throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + " does not exist");
-  const tinygltf::Accessor& a = m.accessors[index];
-  if (a.bufferView < 0) return std::vector<float>(a.count * comps, 0.0f);  // sparse-only: zeros
-  const tinygltf::BufferView& v = m.bufferViews.at(a.bufferView);
-  const tinygltf::Buffer& b = m.buffers.at(v.buffer);
-  const int n = tinygltf::GetNumComponentsInType(a.type);
-  if (n != comps) throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + " has " + std::to_string(n) + " components, expected " + std::to_string(comps));
-  const int csize = tinygltf::GetComponentSizeInBytes(a.componentType);
-  const size_t stride = v.byteStride ? v.byteStride : static_cast<size_t>(csize) * n;
-  const size_t start = v.byteOffset + a.byteOffset;
-  if (a.count > 0 && start + stride * (a.count - 1) + static_cast<size_t>(csize) * n > b.data.size()) {
-    throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + " runs past the end of its buffer");
-  }
-  std::vector<float> out(a.count * n);
-  for (size_t i = 0; i < a.count; ++i) {
-    const unsigned char* p = b.data.data() + start + i * stride;
-    for (int c = 0; c < n; ++c) {
-      const unsigned char* q = p + c * csize;
-      float f = 0.0f;
-      switch (a.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_FLOAT:
-          std::memcpy(&f, q, 4);
-          if (!std::isfinite(f)) {
-            throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + " holds a non-finite float (element " + std::to_string(i) + ")");
-          }
-          break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = *q / (a.normalized ? 255.0f : 1.0f); break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, q, 2); f = s / (a.normalized ? 65535.0f : 1.0f); break; }
-        case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, q, 2); f = a.normalized ? std::fmax(s / 32767.0f, -1.0f) : s; break; }
-        case TINYGLTF_COMPONENT_TYPE_BYTE: { int8_t s; std::memcpy(&s, q, 1); f = a.normalized ? std::fmax(s / 127.0f, -1.0f) : s; break; }
-        default: throw ParseError(file, 0, 0, "accessor " + std::to_string(index) + ": unsupported component type");
-      }
-      out[i * n + c] = f;
+/// The extensions this reader implements (others, when required, make the file unreadable).
+const std::set<std::string> kSupported = {"KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_emissive_strength",
+                                          "KHR_materials_transmission", "KHR_materials_ior"};
+
+/// tinygltf's image hook: PNG and JPEG (and what else OpenCV reads) to 8-bit RGBA.
+bool decode_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int, const unsigned char* bytes,
+                  int size, void*) {
+  const cv::Mat buf(1, size, CV_8UC1, const_cast<unsigned char*>(bytes));
+  cv::Mat m = size > 0 ? cv::imdecode(buf, cv::IMREAD_UNCHANGED) : cv::Mat();
+  if (m.empty()) {
+    if (err) {
+      *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) +
+              ") cannot be decoded (not a PNG or JPEG image OpenCV reads)\n";
     }
+    return false;
   }
-  return out;
+  if (m.depth() == CV_16U) m.convertTo(m, CV_8U, 1.0 / 257.0);
+  if (m.depth() != CV_8U) m.convertTo(m, CV_8U);
+  cv::Mat rgba;
+  switch (m.channels()) {
+    case 1: cv::cvtColor(m, rgba, cv::COLOR_GRAY2RGBA); break;
+    case 3: cv::cvtColor(m, rgba, cv::COLOR_BGR2RGBA); break;
+    case 4: cv::cvtColor(m, rgba, cv::COLOR_BGRA2RGBA); break;
+    default:
+      if (err) *err += "image " + std::to_string(index) + " has " + std::to_string(m.channels()) + " channels\n";
+      return false;
+  }
+  image->width = rgba.cols;
+  image->height = rgba.rows;
+  image->component = 4;
+  image->bits = 8;
+  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image->image.assign(rgba.data, rgba.data + rgba.total() * 4);
+  return true;
 }
+
+/// Accessor component `q` of type `ctype` as a float (normalised integers to [0, 1] or [-1, 1]).
+float component(const unsigned char* q, int ctype, bool normalized) {
+  switch (ctype) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); return f; }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return *q / (normalized ? 255.0f : 1.0f);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t s; std::memcpy(&s, q, 2); return s / (normalized ? 65535.0f : 1.0f); }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: { int16_t s; std::memcpy(&s, q, 2); return normalized ? std::fmax(s / 32767.0f, -1.0f) : s; }
+    case TINYGLTF_COMPONENT_TYPE_BYTE: { int8_t s; std::memcpy(&s, q, 1); return normalized ? std::fmax(s / 127.0f, -1.0f) : s; }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t s; std::memcpy(&s, q, 4); return static_cast<float>(s); }
+    default: return std::numeric_limits<float>::quiet_NaN();
+  }
+}
+
+class Reader {
+ public:
+  Reader(const tinygltf::Model& m, const std::string& file) : m_(m), file_(file) {}
+
+  [[noreturn]] void fail(const std::string& what) const { throw ParseError(file_, 0, 0, what); }
+
+  /// The bytes of a bufferView from `offset` for `count` elements of `elem` bytes at `stride`,
+  /// checked to lie inside the buffer.
+  const unsigned char* span(int view, size_t offset, size_t count, size_t elem, size_t stride, const std::string& what) const {
+    if (view < 0 || view >= static_cast<int>(m_.bufferViews.size())) fail(what + " names bufferView " + std::to_string(view) + ", which does not exist");
+    const tinygltf::BufferView& v = m_.bufferViews[static_cast<size_t>(view)];
+    if (v.buffer < 0 || v.buffer >= static_cast<int>(m_.buffers.size())) fail(what + ": its bufferView names a buffer that does not exist");
+    const tinygltf::Buffer& b = m_.buffers[static_cast<size_t>(v.buffer)];
+    const size_t start = v.byteOffset + offset;
+    if (count > 0 && (start + stride * (count - 1) + elem > b.data.size() || offset + stride * (count - 1) + elem > v.byteLength)) {
+      fail(what + " runs past the end of its buffer");
+    }
+    return b.data.data() + start;
+  }
+
+  /// Accessor `index` as `comps` floats per element (normalised integers converted), with its
+  /// sparse substitutes applied. Non-finite floats are an error.
+  std::vector<float> floats(int index, int comps, const std::string& what) const {
+    const std::string acc = what + " (accessor " + std::to_string(index) + ")";
+    if (index < 0 || index >= static_cast<int>(m_.accessors.size())) fail(what + " names accessor " + std::to_string(index) + ", which does not exist");
+    const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(index)];
+    const int n = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
+    if (n != comps) fail(acc + " has " + std::to_string(n) + " components, expected " + std::to_string(comps));
+    const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
+    if (csize <= 0) fail(acc + ": unsupported component type " + std::to_string(a.componentType));
+    if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " elements");
+    std::vector<float> out(a.count * static_cast<size_t>(n), 0.0f);
+    auto read_into = [&](const unsigned char* p, size_t stride, size_t count, const std::vector<size_t>* dst) {
+      for (size_t i = 0; i < count; ++i) {
+        const size_t at = dst ? (*dst)[i] : i;
+        for (int c = 0; c < n; ++c) {
+          const float f = component(p + i * stride + static_cast<size_t>(c) * csize, a.componentType, a.normalized);
+          if (!std::isfinite(f)) fail(acc + " holds a non-finite float (element " + std::to_string(at) + ")");
+          out[at * n + c] = f;
+        }
+      }
+    };
+    if (a.bufferView >= 0) {
+      const tinygltf::BufferView& v = m_.bufferViews.at(static_cast<size_t>(a.bufferView));
+      const size_t elem = static_cast<size_t>(csize) * n;
+      const size_t stride = v.byteStride ? v.byteStride : elem;
+      read_into(span(a.bufferView, a.byteOffset, a.count, elem, stride, acc), stride, a.count, nullptr);
+    }
+    if (a.sparse.isSparse) {
+      const auto& sp = a.sparse;
+      if (sp.count < 0 || static_cast<size_t>(sp.count) > a.count) fail(acc + ": sparse count " + std::to_string(sp.count) + " out of range");
+      const int isize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(sp.indices.componentType));
+      if (isize != 1 && isize != 2 && isize != 4) fail(acc + ": sparse indices of an unsupported component type");
+      const unsigned char* ip = span(sp.indices.bufferView, static_cast<size_t>(sp.indices.byteOffset), static_cast<size_t>(sp.count),
+                                     static_cast<size_t>(isize), static_cast<size_t>(isize), acc + " sparse indices");
+      std::vector<size_t> where(static_cast<size_t>(sp.count));
+      for (size_t i = 0; i < where.size(); ++i) {
+        uint32_t k = 0;
+        std::memcpy(&k, ip + i * isize, static_cast<size_t>(isize));
+        if (k >= a.count) fail(acc + ": sparse index " + std::to_string(k) + " past its " + std::to_string(a.count) + " elements");
+        where[i] = k;
+      }
+      const size_t elem = static_cast<size_t>(csize) * n;
+      read_into(span(sp.values.bufferView, static_cast<size_t>(sp.values.byteOffset), where.size(), elem, elem, acc + " sparse values"), elem,
+                where.size(), &where);
+    }
+    return out;
+  }
+
+  std::vector<uint32_t> indices(int index, const std::string& what) const {
+    const std::string acc = what + " (accessor " + std::to_string(index) + ")";
+    if (index < 0 || index >= static_cast<int>(m_.accessors.size())) fail(what + " names accessor " + std::to_string(index) + ", which does not exist");
+    const tinygltf::Accessor& a = m_.accessors[static_cast<size_t>(index)];
+    const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
+    if (a.type != TINYGLTF_TYPE_SCALAR || (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+                                           a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+                                           a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)) {
+      fail(acc + ": indices must be unsigned 8, 16 or 32-bit scalars");
+    }
+    if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " indices");
+    std::vector<uint32_t> out(a.count, 0);
+    if (a.bufferView >= 0) {
+      const tinygltf::BufferView& v = m_.bufferViews.at(static_cast<size_t>(a.bufferView));
+      const size_t stride = v.byteStride ? v.byteStride : static_cast<size_t>(csize);
+      const unsigned char* p = span(a.bufferView, a.byteOffset, a.count, static_cast<size_t>(csize), stride, acc);
+      for (size_t i = 0; i < a.count; ++i) {
+        uint32_t k = 0;
+        std::memcpy(&k, p + i * stride, static_cast<size_t>(csize));
+        out[i] = k;
+      }
+    }
+    if (a.sparse.isSparse) {
+      // rare for indices, but legal: the same substitution as for floats
+      const std::vector<float> f = floats(index, 1, what);
+      for (size_t i = 0; i < out.size(); ++i) out[i] = static_cast<uint32_t>(f[i]);
+    }
+    return out;
+  }
+
+ private:
+  const tinygltf::Model& m_;
+  std::string file_;
+};
 
 /// A number of the glTF JSON as a float; one beyond the float range (or not finite) is an error.
 float to_float(double v, const std::string& file, const std::string& what) {
@@ -73,28 +191,17 @@ Vec to_floats(const std::vector<double>& values, const std::string& file, const 
   return out;
 }
 
-std::vector<uint32_t> read_indices(const tinygltf::Model& m, int index, const std::string& file) {
-  const tinygltf::Accessor& a = m.accessors.at(index);
-  const tinygltf::BufferView& v = m.bufferViews.at(a.bufferView);
-  const tinygltf::Buffer& b = m.buffers.at(v.buffer);
-  const int csize = tinygltf::GetComponentSizeInBytes(a.componentType);
-  const size_t stride = v.byteStride ? v.byteStride : csize;
-  const size_t start = v.byteOffset + a.byteOffset;
-  if (a.count > 0 && start + stride * (a.count - 1) + csize > b.data.size()) throw ParseError(file, 0, 0, "index accessor runs past its buffer");
-  std::vector<uint32_t> out(a.count);
-  for (size_t i = 0; i < a.count; ++i) {
-    const unsigned char* p = b.data.data() + start + i * stride;
-    if (csize == 1) out[i] = *p;
-    else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
-    else { std::memcpy(&out[i], p, 4); }
-  }
-  return out;
+ar::Wrap wrap_of(int w) {
+  return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? ar::Wrap::kClampToEdge
+         : w == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT ? ar::Wrap::kMirroredRepeat
+                                                       : ar::Wrap::kRepeat;
 }
 
 }  // namespace
 
 GltfModel load_gltf(const std::filesystem::path& path) {
   tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(decode_image, nullptr);
   tinygltf::Model m;
   std::string err, warn;
   const std::string file = path.string();
@@ -102,105 +209,340 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   const bool ok = path.extension() == ".glb" ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
                                              : loader.LoadASCIIFromFile(&m, &err, &warn, file);
   if (!ok) throw ParseError(file, 0, 0, "not a readable glTF 2.0 file: " + (err.empty() ? warn : err));
+  const Reader r(m, file);
   GltfModel out;
   out.file = path;
+  out.extensions_used = m.extensionsUsed;
+  out.extensions_required = m.extensionsRequired;
+  for (const std::string& e : m.extensionsRequired) {
+    if (!kSupported.count(e)) throw ParseError(file, 0, 0, "requires extension " + e + ", which this reader does not support");
+  }
+  {
+    std::string ignored;
+    for (const std::string& e : m.extensionsUsed) {
+      if (!kSupported.count(e)) ignored += (ignored.empty() ? "" : ", ") + e;
+    }
+    if (!ignored.empty()) out.warnings.push_back(file + ": ignores the optional extensions " + ignored);
+  }
+
+  // images: those that did not load (a missing file is only a warning for tinygltf) stay empty
+  for (size_t i = 0; i < m.images.size(); ++i) {
+    const tinygltf::Image& img = m.images[i];
+    GltfImage g;
+    g.name = !img.name.empty() ? img.name : !img.uri.empty() && img.uri.rfind("data:", 0) != 0 ? img.uri : "image " + std::to_string(i);
+    if (img.component == 4 && img.bits == 8 && img.image.size() == static_cast<size_t>(img.width) * img.height * 4) {
+      g.width = img.width;
+      g.height = img.height;
+      g.rgba = img.image;
+    }
+    out.images.push_back(std::move(g));
+  }
+  auto texture_ref = [&](int texture, int tex_coord, const tinygltf::ExtensionMap& ext, const std::string& what) {
+    GltfTextureRef t;
+    if (texture < 0) return t;
+    if (texture >= static_cast<int>(m.textures.size())) r.fail(what + " names texture " + std::to_string(texture) + ", which does not exist");
+    const tinygltf::Texture& tex = m.textures[static_cast<size_t>(texture)];
+    if (tex.source < 0 || tex.source >= static_cast<int>(out.images.size())) {
+      r.fail(what + ": texture " + std::to_string(texture) + " has no image this reader can use (its source is " + std::to_string(tex.source) + ")");
+    }
+    const GltfImage& img = out.images[static_cast<size_t>(tex.source)];
+    if (img.rgba.empty()) r.fail(what + ": image " + std::to_string(tex.source) + " ('" + img.name + "') is missing or cannot be decoded");
+    t.image = tex.source;
+    t.tex_coord = tex_coord;
+    if (tex.sampler >= 0) {
+      if (tex.sampler >= static_cast<int>(m.samplers.size())) r.fail(what + ": texture " + std::to_string(texture) + " names a sampler that does not exist");
+      const tinygltf::Sampler& s = m.samplers[static_cast<size_t>(tex.sampler)];
+      t.sampler.wrap_s = wrap_of(s.wrapS);
+      t.sampler.wrap_t = wrap_of(s.wrapT);
+      t.sampler.mag_linear = s.magFilter != TINYGLTF_TEXTURE_FILTER_NEAREST;
+      switch (s.minFilter) {
+        case TINYGLTF_TEXTURE_FILTER_NEAREST: t.sampler.min_linear = false; t.sampler.mipmaps = false; break;
+        case TINYGLTF_TEXTURE_FILTER_LINEAR: t.sampler.mipmaps = false; break;
+        case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_NEAREST: t.sampler.min_linear = false; t.sampler.mip_linear = false; break;
+        case TINYGLTF_TEXTURE_FILTER_LINEAR_MIPMAP_NEAREST: t.sampler.mip_linear = false; break;
+        case TINYGLTF_TEXTURE_FILTER_NEAREST_MIPMAP_LINEAR: t.sampler.min_linear = false; break;
+        default: break;  // LINEAR_MIPMAP_LINEAR, and unspecified
+      }
+    }
+    const auto tt = ext.find("KHR_texture_transform");
+    if (tt != ext.end()) {
+      const tinygltf::Value& v = tt->second;
+      glm::vec2 offset(0.0f), scale(1.0f);
+      float rotation = 0.0f;
+      auto vec2 = [&](const char* key, glm::vec2& into) {
+        if (!v.Has(key)) return;
+        const tinygltf::Value& a = v.Get(key);
+        if (!a.IsArray() || a.ArrayLen() != 2) r.fail(what + ": KHR_texture_transform " + key + " must hold 2 numbers");
+        for (int k = 0; k < 2; ++k) into[k] = to_float(a.Get(k).GetNumberAsDouble(), file, what + " KHR_texture_transform " + key);
+      };
+      vec2("offset", offset);
+      vec2("scale", scale);
+      if (v.Has("rotation")) rotation = to_float(v.Get("rotation").GetNumberAsDouble(), file, what + " KHR_texture_transform rotation");
+      if (v.Has("texCoord")) t.tex_coord = v.Get("texCoord").GetNumberAsInt();
+      // T * R * S as the extension defines them (column-major mat3 acting on (u, v, 1))
+      const float c = std::cos(rotation), sn = std::sin(rotation);
+      const glm::mat3 T(1, 0, 0, 0, 1, 0, offset.x, offset.y, 1);
+      const glm::mat3 R(c, -sn, 0, sn, c, 0, 0, 0, 1);
+      const glm::mat3 S(scale.x, 0, 0, 0, scale.y, 0, 0, 0, 1);
+      t.transform = T * R * S;
+    }
+    if (t.tex_coord < 0 || t.tex_coord > 1) r.fail(what + ": texCoord " + std::to_string(t.tex_coord) + " (this reader takes sets 0 and 1)");
+    return t;
+  };
+
   out.materials.emplace_back();  // default
   for (const tinygltf::Material& mat : m.materials) {
     GltfMaterial g;
     g.name = mat.name;
+    g.pbr = true;
     const auto& pbr = mat.pbrMetallicRoughness;
     const std::string at = "material '" + mat.name + "'";
-    if (pbr.baseColorFactor.size() == 4) g.base_color = to_floats<glm::vec3>(pbr.baseColorFactor, file, at + " baseColorFactor");
+    if (pbr.baseColorFactor.size() == 4) {
+      g.base_color = to_floats<glm::vec3>(pbr.baseColorFactor, file, at + " baseColorFactor");
+      g.alpha = to_float(pbr.baseColorFactor[3], file, at + " alpha");
+    }
+    g.base_color_texture = texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord, pbr.baseColorTexture.extensions, at + " baseColorTexture");
     g.metallic = to_float(pbr.metallicFactor, file, at + " metallicFactor");
     g.roughness = to_float(pbr.roughnessFactor, file, at + " roughnessFactor");
-    if (mat.alphaMode == "BLEND" && pbr.baseColorFactor.size() == 4) g.transmission = 1.0f - to_float(pbr.baseColorFactor[3], file, at + " alpha");
+    g.metallic_roughness_texture = texture_ref(pbr.metallicRoughnessTexture.index, pbr.metallicRoughnessTexture.texCoord,
+                                               pbr.metallicRoughnessTexture.extensions, at + " metallicRoughnessTexture");
+    g.normal_texture = texture_ref(mat.normalTexture.index, mat.normalTexture.texCoord, mat.normalTexture.extensions, at + " normalTexture");
+    g.normal_texture.scale = to_float(mat.normalTexture.scale, file, at + " normalTexture scale");
+    g.occlusion_texture = texture_ref(mat.occlusionTexture.index, mat.occlusionTexture.texCoord, mat.occlusionTexture.extensions, at + " occlusionTexture");
+    g.occlusion_texture.scale = to_float(mat.occlusionTexture.strength, file, at + " occlusionTexture strength");
+    if (mat.emissiveFactor.size() == 3) g.emissive = to_floats<glm::vec3>(mat.emissiveFactor, file, at + " emissiveFactor");
+    g.emissive_texture = texture_ref(mat.emissiveTexture.index, mat.emissiveTexture.texCoord, mat.emissiveTexture.extensions, at + " emissiveTexture");
+    g.alpha_mode = mat.alphaMode == "MASK" ? AlphaMode::kMask : mat.alphaMode == "BLEND" ? AlphaMode::kBlend : AlphaMode::kOpaque;
+    if (mat.alphaMode != "OPAQUE" && mat.alphaMode != "MASK" && mat.alphaMode != "BLEND") r.fail(at + ": unknown alphaMode " + quote_token(mat.alphaMode));
+    g.alpha_cutoff = to_float(mat.alphaCutoff, file, at + " alphaCutoff");
+    g.double_sided = mat.doubleSided;
     const auto t = mat.extensions.find("KHR_materials_transmission");
     if (t != mat.extensions.end() && t->second.Has("transmissionFactor")) {
       g.transmission = to_float(t->second.Get("transmissionFactor").GetNumberAsDouble(), file, at + " transmissionFactor");
     }
     const auto i = mat.extensions.find("KHR_materials_ior");
     if (i != mat.extensions.end() && i->second.Has("ior")) g.ior = to_float(i->second.Get("ior").GetNumberAsDouble(), file, at + " ior");
+    const auto es = mat.extensions.find("KHR_materials_emissive_strength");
+    if (es != mat.extensions.end() && es->second.Has("emissiveStrength")) {
+      g.emissive *= to_float(es->second.Get("emissiveStrength").GetNumberAsDouble(), file, at + " emissiveStrength");
+    }
     out.materials.push_back(g);
   }
-  for (const tinygltf::Mesh& mesh : m.meshes) {
+
+  for (size_t mi = 0; mi < m.meshes.size(); ++mi) {
+    const tinygltf::Mesh& mesh = m.meshes[mi];
     GltfMesh gm;
+    const std::string mname = "mesh '" + (mesh.name.empty() ? std::to_string(mi) : mesh.name) + "'";
     bool any_skinned = false, any_plain = false;
+    size_t targets = 0;
+    for (const tinygltf::Primitive& prim : mesh.primitives) targets = std::max(targets, prim.targets.size());
+    gm.targets.resize(targets);
+    // first pass: which attributes any primitive has, so every vertex gets them
+    bool has_uv[2] = {false, false}, has_color = false, has_normal = false, has_tangent = false, target_normals = false;
+    int sets = 0;
     for (const tinygltf::Primitive& prim : mesh.primitives) {
-      if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != -1) continue;  // points and lines are not rendered
+      has_uv[0] |= prim.attributes.count("TEXCOORD_0") > 0;
+      has_uv[1] |= prim.attributes.count("TEXCOORD_1") > 0;
+      has_color |= prim.attributes.count("COLOR_0") > 0;
+      has_normal |= prim.attributes.count("NORMAL") > 0;
+      has_tangent |= prim.attributes.count("TANGENT") > 0;
+      for (const auto& tg : prim.targets) target_normals |= tg.count("NORMAL") > 0;
+      int s = 0;
+      while (prim.attributes.count("JOINTS_" + std::to_string(s))) ++s;
+      sets = std::max(sets, s);
+    }
+    gm.influence_sets = sets;
+    for (size_t pi = 0; pi < mesh.primitives.size(); ++pi) {
+      const tinygltf::Primitive& prim = mesh.primitives[pi];
+      const std::string where = mname + " primitive " + std::to_string(pi);
+      const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+      if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        static const char* kModes[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP"};
+        out.warnings.push_back(file + ": " + where + " draws " + (mode >= 0 && mode < 4 ? kModes[mode] : "mode " + std::to_string(mode)) +
+                               ", which is not rendered (skipped)");
+        continue;
+      }
       const auto pos_it = prim.attributes.find("POSITION");
-      if (pos_it == prim.attributes.end()) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' has a primitive without POSITION");
-      const std::vector<float> pos = read_floats(m, pos_it->second, 3, file);
+      if (pos_it == prim.attributes.end()) r.fail(where + " has no POSITION");
+      const std::vector<float> pos = r.floats(pos_it->second, 3, where + " POSITION");
       const size_t nv = pos.size() / 3;
       std::vector<uint32_t> idx;
-      if (prim.indices >= 0) idx = read_indices(m, prim.indices, file);
-      else for (uint32_t k = 0; k < nv; ++k) idx.push_back(k);
-      if (idx.size() % 3) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': index count is not a multiple of 3");
-      const uint32_t material = prim.material >= 0 ? static_cast<uint32_t>(prim.material + 1) : 0u;
-      if (material >= out.materials.size()) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' names material " + std::to_string(prim.material) + ", which does not exist");
-      const uint32_t base = static_cast<uint32_t>(gm.positions.size());
-      for (size_t k = 0; k < nv; ++k) gm.positions.emplace_back(pos[3 * k], pos[3 * k + 1], pos[3 * k + 2]);
-      const auto j_it = prim.attributes.find("JOINTS_0"), w_it = prim.attributes.find("WEIGHTS_0");
-      if ((j_it == prim.attributes.end()) != (w_it == prim.attributes.end())) {
-        throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' has JOINTS_0 without WEIGHTS_0 or the reverse");
-      }
-      if (j_it != prim.attributes.end()) {
-        any_skinned = true;
-        const std::vector<float> j = read_floats(m, j_it->second, 4, file), w = read_floats(m, w_it->second, 4, file);
-        if (j.size() != 4 * nv || w.size() != 4 * nv) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': JOINTS_0/WEIGHTS_0 count differs from POSITION");
-        gm.joints.resize(gm.positions.size() - nv);
-        gm.weights.resize(gm.positions.size() - nv);
-        for (size_t k = 0; k < nv; ++k) {
-          gm.joints.emplace_back(j[4 * k], j[4 * k + 1], j[4 * k + 2], j[4 * k + 3]);
-          gm.weights.emplace_back(w[4 * k], w[4 * k + 1], w[4 * k + 2], w[4 * k + 3]);
-        }
+      if (prim.indices >= 0) {
+        idx = r.indices(prim.indices, where + " indices");
       } else {
-        any_plain = true;
+        idx.resize(nv);
+        for (uint32_t k = 0; k < nv; ++k) idx[k] = k;
       }
-      for (size_t k = 0; k < idx.size(); k += 3) {
-        for (int c = 0; c < 3; ++c) {
-          if (idx[k + c] >= nv) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "': index " + std::to_string(idx[k + c]) + " past its " + std::to_string(nv) + " vertices");
+      for (const uint32_t k : idx) {
+        if (k >= nv) r.fail(where + ": index " + std::to_string(k) + " past its " + std::to_string(nv) + " vertices");
+      }
+      // the primitive's triangles, in its own vertex numbering
+      std::vector<glm::uvec3> tri;
+      if (mode == TINYGLTF_MODE_TRIANGLES) {
+        if (idx.size() % 3) r.fail(where + ": index count " + std::to_string(idx.size()) + " is not a multiple of 3");
+        for (size_t k = 0; k + 2 < idx.size(); k += 3) tri.emplace_back(idx[k], idx[k + 1], idx[k + 2]);
+      } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+        // glTF 2.0, 3.7.2.1: triangle i is (i, i + 1 + i % 2, i + 2 - i % 2), keeping the winding
+        for (size_t k = 0; k + 2 < idx.size(); ++k) tri.emplace_back(idx[k], idx[k + 1 + k % 2], idx[k + 2 - k % 2]);
+      } else {
+        for (size_t k = 1; k + 1 < idx.size(); ++k) tri.emplace_back(idx[k], idx[k + 1], idx[0]);
+      }
+      const uint32_t material = prim.material >= 0 ? static_cast<uint32_t>(prim.material + 1) : 0u;
+      if (material >= out.materials.size()) r.fail(where + " names material " + std::to_string(prim.material) + ", which does not exist");
+
+      // per-vertex attributes of the primitive
+      auto attribute = [&](const char* name, int comps) {
+        const auto it = prim.attributes.find(name);
+        if (it == prim.attributes.end()) return std::vector<float>();
+        std::vector<float> v = r.floats(it->second, comps, where + " " + name);
+        if (v.size() != nv * static_cast<size_t>(comps)) r.fail(where + ": " + name + " count differs from POSITION");
+        return v;
+      };
+      const std::vector<float> normal = attribute("NORMAL", 3), tangent = attribute("TANGENT", 4);
+      std::vector<float> uv[2] = {attribute("TEXCOORD_0", 2), attribute("TEXCOORD_1", 2)};
+      std::vector<float> color;
+      if (const auto c = prim.attributes.find("COLOR_0"); c != prim.attributes.end()) {
+        const tinygltf::Accessor& a = m.accessors.at(static_cast<size_t>(c->second));
+        const int comps = a.type == TINYGLTF_TYPE_VEC3 ? 3 : 4;
+        const std::vector<float> raw = attribute("COLOR_0", comps);
+        color.resize(nv * 4, 1.0f);
+        for (size_t k = 0; k < nv; ++k)
+          for (int ch = 0; ch < comps; ++ch) color[4 * k + ch] = raw[comps * k + ch];
+      }
+      int psets = 0;
+      while (prim.attributes.count("JOINTS_" + std::to_string(psets))) ++psets;
+      for (int s = 0; s < psets; ++s) {
+        if (!prim.attributes.count("WEIGHTS_" + std::to_string(s))) r.fail(where + " has JOINTS_" + std::to_string(s) + " without WEIGHTS_" + std::to_string(s));
+      }
+      if (psets == 0 && prim.attributes.count("WEIGHTS_0")) r.fail(where + " has WEIGHTS_0 without JOINTS_0");
+      (psets > 0 ? any_skinned : any_plain) = true;
+
+      // vertices: shared as the file shares them, or one per triangle corner where the primitive
+      // has no normals but others do (flat normals then need their own vertices)
+      const bool flat = has_normal && normal.empty();
+      std::vector<uint32_t> source;  // the primitive vertex each new vertex copies
+      if (flat) {
+        for (const glm::uvec3& t : tri) source.insert(source.end(), {t.x, t.y, t.z});
+      } else {
+        source.resize(nv);
+        for (uint32_t k = 0; k < nv; ++k) source[k] = k;
+      }
+      const uint32_t base = static_cast<uint32_t>(gm.positions.size());
+      auto p3 = [&](const std::vector<float>& v, uint32_t k) { return glm::vec3(v[3 * k], v[3 * k + 1], v[3 * k + 2]); };
+      for (size_t n = 0; n < source.size(); ++n) {
+        const uint32_t k = source[n];
+        gm.positions.push_back(p3(pos, k));
+        if (has_normal) {
+          if (!flat) {
+            gm.normals.push_back(p3(normal, k));
+          } else {
+            const glm::uvec3& t = tri[n / 3];
+            const glm::vec3 f = glm::cross(p3(pos, t.y) - p3(pos, t.x), p3(pos, t.z) - p3(pos, t.x));
+            const float len = glm::length(f);
+            gm.normals.push_back(len > 0.0f ? f / len : glm::vec3(0.0f, 0.0f, 1.0f));
+          }
         }
-        auto v = [&](uint32_t i) { return glm::vec3(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]); };
-        gm.tris.push_back({v(idx[k]), v(idx[k + 1]), v(idx[k + 2])});
-        gm.indices.emplace_back(base + idx[k], base + idx[k + 1], base + idx[k + 2]);
+        if (has_tangent) gm.tangents.push_back(tangent.empty() ? glm::vec4(0.0f) : glm::vec4(p3(tangent, k), tangent[4 * k + 3]));
+        for (int s = 0; s < 2; ++s) {
+          if (has_uv[s]) gm.uv[s].push_back(uv[s].empty() ? glm::vec2(0.0f) : glm::vec2(uv[s][2 * k], uv[s][2 * k + 1]));
+        }
+        if (has_color) gm.colors.push_back(color.empty() ? glm::vec4(1.0f) : glm::vec4(color[4 * k], color[4 * k + 1], color[4 * k + 2], color[4 * k + 3]));
+      }
+      if (sets > 0) {
+        for (int s = 0; s < sets; ++s) {
+          std::vector<float> j, w;
+          if (s < psets) {
+            j = attribute(("JOINTS_" + std::to_string(s)).c_str(), 4);
+            w = attribute(("WEIGHTS_" + std::to_string(s)).c_str(), 4);
+          }
+          for (size_t n = 0; n < source.size(); ++n) {
+            const uint32_t k = source[n];
+            const size_t v = base + n;
+            if (gm.joints.size() < (v + 1) * sets) {
+              gm.joints.resize((v + 1) * sets, glm::uvec4(0));
+              gm.weights.resize((v + 1) * sets, glm::vec4(0.0f));
+            }
+            if (!j.empty()) {
+              for (int c = 0; c < 4; ++c) {
+                if (!(j[4 * k + c] >= 0.0f) || j[4 * k + c] > 65535.0f) r.fail(where + ": JOINTS_" + std::to_string(s) + " holds an invalid joint index");
+              }
+              gm.joints[v * sets + s] = glm::uvec4(j[4 * k], j[4 * k + 1], j[4 * k + 2], j[4 * k + 3]);
+              gm.weights[v * sets + s] = glm::vec4(w[4 * k], w[4 * k + 1], w[4 * k + 2], w[4 * k + 3]);
+            }
+          }
+        }
+      }
+      // morph targets: deltas per new vertex
+      for (size_t ti = 0; ti < targets; ++ti) {
+        GltfMorphTarget& target = gm.targets[ti];
+        std::vector<float> dp, dn;
+        if (ti < prim.targets.size()) {
+          const auto& tg = prim.targets[ti];
+          const std::string tw = where + " target " + std::to_string(ti);
+          if (const auto it = tg.find("POSITION"); it != tg.end()) dp = r.floats(it->second, 3, tw + " POSITION");
+          if (const auto it = tg.find("NORMAL"); it != tg.end()) dn = r.floats(it->second, 3, tw + " NORMAL");
+          if ((!dp.empty() && dp.size() != 3 * nv) || (!dn.empty() && dn.size() != 3 * nv)) r.fail(tw + ": count differs from POSITION");
+        }
+        for (size_t n = 0; n < source.size(); ++n) {
+          const uint32_t k = source[n];
+          target.position.push_back(dp.empty() ? glm::vec3(0.0f) : p3(dp, k));
+          if (target_normals) target.normal.push_back(dn.empty() ? glm::vec3(0.0f) : p3(dn, k));
+        }
+      }
+      for (size_t t = 0; t < tri.size(); ++t) {
+        const glm::uvec3 v = flat ? glm::uvec3(base + 3 * t, base + 3 * t + 1, base + 3 * t + 2) : glm::uvec3(base) + tri[t];
+        gm.indices.push_back(v);
         gm.material.push_back(material);
       }
     }
-    if (any_skinned && any_plain) throw ParseError(file, 0, 0, "mesh '" + mesh.name + "' mixes skinned and unskinned primitives");
+    if (any_skinned && any_plain) r.fail(mname + " mixes skinned and unskinned primitives");
+    gm.default_weights.assign(targets, 0.0f);
+    for (size_t k = 0; k < mesh.weights.size() && k < targets; ++k) gm.default_weights[k] = to_float(mesh.weights[k], file, mname + " weights");
     out.meshes.push_back(std::move(gm));
   }
+  // bind-pose triangles, with the default morph weights applied
+  for (size_t mi = 0; mi < out.meshes.size(); ++mi) {
+    GltfMesh& gm = out.meshes[mi];
+    const std::vector<glm::vec3> p = gm.morphed() ? out.morphed_positions(static_cast<int>(mi), gm.default_weights) : gm.positions;
+    for (const glm::uvec3& t : gm.indices) gm.tris.push_back({p[t.x], p[t.y], p[t.z]});
+  }
+
   // nodes: order parents before children (glTF does not promise it)
   std::vector<int> parent(m.nodes.size(), -1);
   for (size_t i = 0; i < m.nodes.size(); ++i) {
     for (const int c : m.nodes[i].children) {
-      if (c < 0 || c >= static_cast<int>(m.nodes.size()) || parent[c] != -1) throw ParseError(file, 0, 0, "node " + std::to_string(c) + " has two parents or does not exist");
-      parent[c] = static_cast<int>(i);
+      if (c < 0 || c >= static_cast<int>(m.nodes.size()) || parent[static_cast<size_t>(c)] != -1) {
+        throw ParseError(file, 0, 0, "node " + std::to_string(c) + " has two parents or does not exist");
+      }
+      parent[static_cast<size_t>(c)] = static_cast<int>(i);
     }
   }
   std::vector<int> order, new_index(m.nodes.size(), -1);
   std::function<void(int)> visit = [&](int n) {
     if (order.size() > m.nodes.size()) throw ParseError(file, 0, 0, "the node hierarchy has a cycle");
-    new_index[n] = static_cast<int>(order.size());
+    new_index[static_cast<size_t>(n)] = static_cast<int>(order.size());
     order.push_back(n);
-    for (const int c : m.nodes[n].children) visit(c);
+    for (const int c : m.nodes[static_cast<size_t>(n)].children) visit(c);
   };
   for (size_t i = 0; i < m.nodes.size(); ++i) {
     if (parent[i] == -1) visit(static_cast<int>(i));
   }
   if (order.size() != m.nodes.size()) throw ParseError(file, 0, 0, "the node hierarchy has a cycle");
   for (const int n : order) {
-    const tinygltf::Node& src = m.nodes[n];
+    const tinygltf::Node& src = m.nodes[static_cast<size_t>(n)];
     GltfNode g;
     g.name = src.name;
-    g.parent = parent[n] >= 0 ? new_index[parent[n]] : -1;
+    g.parent = parent[static_cast<size_t>(n)] >= 0 ? new_index[static_cast<size_t>(parent[static_cast<size_t>(n)])] : -1;
     g.mesh = src.mesh;
     if (g.mesh >= static_cast<int>(out.meshes.size())) throw ParseError(file, 0, 0, "node '" + src.name + "' names a mesh that does not exist");
     g.skin = src.skin;
     if (g.skin >= static_cast<int>(m.skins.size())) throw ParseError(file, 0, 0, "node '" + src.name + "' names a skin that does not exist");
-    if (g.skin >= 0 && (g.mesh < 0 || !out.meshes[g.mesh].skinned())) throw ParseError(file, 0, 0, "node '" + src.name + "' has a skin but no mesh with JOINTS_0/WEIGHTS_0");
+    if (g.skin >= 0 && (g.mesh < 0 || !out.meshes[static_cast<size_t>(g.mesh)].skinned())) {
+      throw ParseError(file, 0, 0, "node '" + src.name + "' has a skin but no mesh with JOINTS_0/WEIGHTS_0");
+    }
     if (src.matrix.size() == 16) {
       g.has_matrix = true;
-      for (int k = 0; k < 16; ++k) glm::value_ptr(g.matrix)[k] = to_float(src.matrix[k], file, "node '" + src.name + "' matrix");
+      for (int k = 0; k < 16; ++k) glm::value_ptr(g.matrix)[k] = to_float(src.matrix[static_cast<size_t>(k)], file, "node '" + src.name + "' matrix");
     }
     if (src.translation.size() == 3) g.translation = to_floats<glm::vec3>(src.translation, file, "node '" + src.name + "' translation");
     if (src.rotation.size() == 4) {
@@ -208,6 +550,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
       g.rotation = glm::quat(q.w, q.x, q.y, q.z);
     }
     if (src.scale.size() == 3) g.scale = to_floats<glm::vec3>(src.scale, file, "node '" + src.name + "' scale");
+    for (const double w : src.weights) g.weights.push_back(to_float(w, file, "node '" + src.name + "' weights"));
     out.nodes.push_back(g);
   }
   for (const tinygltf::Skin& sk : m.skins) {
@@ -215,10 +558,10 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     gs.name = sk.name;
     for (const int j : sk.joints) {
       if (j < 0 || j >= static_cast<int>(m.nodes.size())) throw ParseError(file, 0, 0, "skin '" + sk.name + "' names joint node " + std::to_string(j) + ", which does not exist");
-      gs.joints.push_back(new_index[j]);
+      gs.joints.push_back(new_index[static_cast<size_t>(j)]);
     }
     if (sk.inverseBindMatrices >= 0) {
-      const std::vector<float> ib = read_floats(m, sk.inverseBindMatrices, 16, file);
+      const std::vector<float> ib = r.floats(sk.inverseBindMatrices, 16, "skin '" + sk.name + "' inverseBindMatrices");
       if (ib.size() != 16 * gs.joints.size()) throw ParseError(file, 0, 0, "skin '" + sk.name + "': inverseBindMatrices count differs from its joints");
       for (size_t k = 0; k < gs.joints.size(); ++k) gs.inverse_bind.push_back(glm::make_mat4(&ib[16 * k]));
     } else {
@@ -228,33 +571,50 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   }
   for (const GltfNode& n : out.nodes) {
     if (n.skin < 0) continue;
-    const size_t joints = out.skins[n.skin].joints.size();
-    for (const glm::uvec4& j : out.meshes[n.mesh].joints) {
+    const size_t joints = out.skins[static_cast<size_t>(n.skin)].joints.size();
+    for (const glm::uvec4& j : out.meshes[static_cast<size_t>(n.mesh)].joints) {
       if (j.x >= joints || j.y >= joints || j.z >= joints || j.w >= joints) {
-        throw ParseError(file, 0, 0, "node '" + n.name + "': a vertex names joint " + std::to_string(std::max({j.x, j.y, j.z, j.w})) + " of a skin with " + std::to_string(joints));
+        throw ParseError(file, 0, 0, "node '" + n.name + "': a vertex names joint " + std::to_string(std::max({j.x, j.y, j.z, j.w})) + " of a skin with " +
+                                         std::to_string(joints));
       }
     }
   }
   for (const tinygltf::Animation& a : m.animations) {
     GltfAnimation ga;
     ga.name = a.name;
+    const std::string an = "animation '" + a.name + "'";
     for (const tinygltf::AnimationChannel& ch : a.channels) {
-      if (ch.target_node < 0 || ch.target_node >= static_cast<int>(m.nodes.size())) throw ParseError(file, 0, 0, "animation '" + a.name + "' targets a node that does not exist");
-      if (ch.target_path == "weights") continue;  // morph targets are not supported
-      const tinygltf::AnimationSampler& s = a.samplers.at(ch.sampler);
+      if (ch.target_node < 0 || ch.target_node >= static_cast<int>(m.nodes.size())) throw ParseError(file, 0, 0, an + " targets a node that does not exist");
+      if (ch.sampler < 0 || ch.sampler >= static_cast<int>(a.samplers.size())) throw ParseError(file, 0, 0, an + " names a sampler that does not exist");
+      const tinygltf::AnimationSampler& s = a.samplers[static_cast<size_t>(ch.sampler)];
       GltfChannel c;
-      c.node = new_index[ch.target_node];
-      c.path = ch.target_path == "translation" ? GltfChannel::kTranslation : ch.target_path == "rotation" ? GltfChannel::kRotation : GltfChannel::kScale;
-      if (ch.target_path != "translation" && ch.target_path != "rotation" && ch.target_path != "scale") throw ParseError(file, 0, 0, "animation '" + a.name + "': unknown target path '" + ch.target_path + "'");
+      c.node = new_index[static_cast<size_t>(ch.target_node)];
+      if (ch.target_path == "translation") c.path = GltfChannel::kTranslation;
+      else if (ch.target_path == "rotation") c.path = GltfChannel::kRotation;
+      else if (ch.target_path == "scale") c.path = GltfChannel::kScale;
+      else if (ch.target_path == "weights") c.path = GltfChannel::kWeights;
+      else throw ParseError(file, 0, 0, an + ": unknown target path " + quote_token(ch.target_path));
       c.interpolation = s.interpolation == "STEP" ? GltfChannel::kStep : s.interpolation == "CUBICSPLINE" ? GltfChannel::kCubic : GltfChannel::kLinear;
-      c.times = read_floats(m, s.input, 1, file);
-      const int comps = c.path == GltfChannel::kRotation ? 4 : 3;
-      const std::vector<float> v = read_floats(m, s.output, comps, file);
-      for (size_t k = 0; k + comps <= v.size(); k += comps) c.values.push_back(glm::vec4(v[k], v[k + 1], v[k + 2], comps == 4 ? v[k + 3] : 0.0f));
+      c.times = r.floats(s.input, 1, an + " input");
       const size_t per_key = c.interpolation == GltfChannel::kCubic ? 3 : 1;
-      if (c.times.empty() || c.values.size() != c.times.size() * per_key) throw ParseError(file, 0, 0, "animation '" + a.name + "': sampler input and output counts do not match");
+      if (c.path == GltfChannel::kWeights) {
+        const GltfNode& node = out.nodes[static_cast<size_t>(c.node)];
+        if (node.mesh < 0 || !out.meshes[static_cast<size_t>(node.mesh)].morphed()) throw ParseError(file, 0, 0, an + " animates the weights of a node without morph targets");
+        c.weight_count = static_cast<int>(out.meshes[static_cast<size_t>(node.mesh)].targets.size());
+        c.weights = r.floats(s.output, 1, an + " output");
+        if (c.times.empty() || c.weights.size() != c.times.size() * per_key * static_cast<size_t>(c.weight_count)) {
+          throw ParseError(file, 0, 0, an + ": sampler input and output counts do not match");
+        }
+      } else {
+        const int comps = c.path == GltfChannel::kRotation ? 4 : 3;
+        const std::vector<float> v = r.floats(s.output, comps, an + " output");
+        for (size_t k = 0; k + comps <= v.size(); k += static_cast<size_t>(comps)) {
+          c.values.push_back(glm::vec4(v[k], v[k + 1], v[k + 2], comps == 4 ? v[k + 3] : 0.0f));
+        }
+        if (c.times.empty() || c.values.size() != c.times.size() * per_key) throw ParseError(file, 0, 0, an + ": sampler input and output counts do not match");
+      }
       for (size_t k = 1; k < c.times.size(); ++k) {
-        if (!(c.times[k] > c.times[k - 1])) throw ParseError(file, 0, 0, "animation '" + a.name + "': key times must increase");
+        if (!(c.times[k] > c.times[k - 1])) throw ParseError(file, 0, 0, an + ": key times must increase");
       }
       ga.duration_s = std::max(ga.duration_s, c.times.back());
       ga.channels.push_back(std::move(c));
@@ -266,14 +626,29 @@ GltfModel load_gltf(const std::filesystem::path& path) {
 
 namespace {
 
+/// The key interval around t: index i and the fraction s in it; false before the first key or after
+/// the last (then `i` is that key).
+bool key_interval(const std::vector<float>& k, float t, size_t& i, float& s, float& dt) {
+  if (t <= k.front()) {
+    i = 0;
+    return false;
+  }
+  if (t >= k.back()) {
+    i = k.size() - 1;
+    return false;
+  }
+  i = static_cast<size_t>(std::upper_bound(k.begin(), k.end(), t) - k.begin()) - 1;
+  dt = k[i + 1] - k[i];
+  s = (t - k[i]) / dt;
+  return true;
+}
+
 glm::vec4 sample(const GltfChannel& c, float t) {
-  const auto& k = c.times;
   const bool cubic = c.interpolation == GltfChannel::kCubic;
   auto value = [&](size_t i) { return cubic ? c.values[3 * i + 1] : c.values[i]; };
-  if (t <= k.front()) return value(0);
-  if (t >= k.back()) return value(k.size() - 1);
-  const size_t i = static_cast<size_t>(std::upper_bound(k.begin(), k.end(), t) - k.begin()) - 1;
-  const float dt = k[i + 1] - k[i], s = (t - k[i]) / dt;
+  size_t i;
+  float s = 0.0f, dt = 0.0f;
+  if (!key_interval(c.times, t, i, s, dt)) return value(i);
   if (c.interpolation == GltfChannel::kStep) return value(i);
   if (cubic) {
     // glTF 2.0 spec, appendix C: Hermite with tangents scaled by the key interval
@@ -293,6 +668,31 @@ glm::vec4 sample(const GltfChannel& c, float t) {
   return glm::mix(c.values[i], c.values[i + 1], s);
 }
 
+std::vector<float> sample_weights(const GltfChannel& c, float t) {
+  const size_t n = static_cast<size_t>(c.weight_count);
+  const bool cubic = c.interpolation == GltfChannel::kCubic;
+  // element e of key i's value (cubic: in-tangent, value, out-tangent blocks of n)
+  auto at = [&](size_t i, size_t part, size_t e) { return cubic ? c.weights[(3 * i + part) * n + e] : c.weights[i * n + e]; };
+  std::vector<float> w(n);
+  size_t i;
+  float s = 0.0f, dt = 0.0f;
+  const bool inside = key_interval(c.times, t, i, s, dt);
+  for (size_t e = 0; e < n; ++e) {
+    if (!inside || c.interpolation == GltfChannel::kStep) {
+      w[e] = at(i, 1, e);
+    } else if (cubic) {
+      const float p0 = at(i, 1, e), m0 = dt * at(i, 2, e), p1 = at(i + 1, 1, e), m1 = dt * at(i + 1, 0, e);
+      const float s2 = s * s, s3 = s2 * s;
+      w[e] = (2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * m0 + (-2 * s3 + 3 * s2) * p1 + (s3 - s2) * m1;
+    } else {
+      w[e] = at(i, 1, e) + s * (at(i + 1, 1, e) - at(i, 1, e));
+    }
+  }
+  return w;
+}
+
+float clip_time(const GltfAnimation& a, float t) { return a.duration_s > 0.0f ? std::fmod(std::fmax(t, 0.0f), a.duration_s) : 0.0f; }
+
 }  // namespace
 
 std::vector<glm::mat4> GltfModel::node_transforms(int clip, float t) const {
@@ -304,40 +704,90 @@ std::vector<glm::mat4> GltfModel::node_transforms(int clip, float t) const {
     sc[i] = nodes[i].scale;
   }
   if (clip >= 0 && clip < static_cast<int>(animations.size())) {
-    const GltfAnimation& a = animations[clip];
-    const float local = a.duration_s > 0.0f ? std::fmod(std::fmax(t, 0.0f), a.duration_s) : 0.0f;
+    const GltfAnimation& a = animations[static_cast<size_t>(clip)];
+    const float local = clip_time(a, t);
     for (const GltfChannel& c : a.channels) {
+      if (c.path == GltfChannel::kWeights) continue;
       const glm::vec4 v = sample(c, local);
-      if (c.path == GltfChannel::kTranslation) tr[c.node] = glm::vec3(v);
-      else if (c.path == GltfChannel::kScale) sc[c.node] = glm::vec3(v);
-      else rot[c.node] = glm::normalize(glm::quat(v.w, v.x, v.y, v.z));
+      if (c.path == GltfChannel::kTranslation) tr[static_cast<size_t>(c.node)] = glm::vec3(v);
+      else if (c.path == GltfChannel::kScale) sc[static_cast<size_t>(c.node)] = glm::vec3(v);
+      else rot[static_cast<size_t>(c.node)] = glm::normalize(glm::quat(v.w, v.x, v.y, v.z));
     }
   }
   std::vector<glm::mat4> world(nodes.size());
   for (size_t i = 0; i < nodes.size(); ++i) {
     const glm::mat4 local = nodes[i].has_matrix ? nodes[i].matrix
                                                 : glm::translate(glm::mat4(1.0f), tr[i]) * glm::mat4_cast(rot[i]) * glm::scale(glm::mat4(1.0f), sc[i]);
-    world[i] = nodes[i].parent >= 0 ? world[nodes[i].parent] * local : local;
+    world[i] = nodes[i].parent >= 0 ? world[static_cast<size_t>(nodes[i].parent)] * local : local;
   }
   return world;
 }
 
-std::vector<glm::vec3> GltfModel::skinned_positions(int mesh, int skin, const std::vector<glm::mat4>& node_world) const {
+std::vector<std::vector<float>> GltfModel::node_weights(int clip, float t) const {
+  std::vector<std::vector<float>> w(nodes.size());
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    if (nodes[i].mesh < 0 || !meshes[static_cast<size_t>(nodes[i].mesh)].morphed()) continue;
+    const GltfMesh& m = meshes[static_cast<size_t>(nodes[i].mesh)];
+    w[i] = m.default_weights;
+    for (size_t k = 0; k < nodes[i].weights.size() && k < w[i].size(); ++k) w[i][k] = nodes[i].weights[k];
+  }
+  if (clip >= 0 && clip < static_cast<int>(animations.size())) {
+    const GltfAnimation& a = animations[static_cast<size_t>(clip)];
+    for (const GltfChannel& c : a.channels) {
+      if (c.path == GltfChannel::kWeights) w[static_cast<size_t>(c.node)] = sample_weights(c, clip_time(a, t));
+    }
+  }
+  return w;
+}
+
+std::vector<glm::vec3> GltfModel::morphed_positions(int mesh, const std::vector<float>& weights, std::vector<glm::vec3>* normals) const {
+  const GltfMesh& m = meshes.at(static_cast<size_t>(mesh));
+  std::vector<glm::vec3> p = m.positions;
+  if (normals) *normals = m.normals;
+  for (size_t t = 0; t < m.targets.size() && t < weights.size(); ++t) {
+    const float w = weights[t];
+    if (w == 0.0f) continue;
+    const GltfMorphTarget& target = m.targets[t];
+    for (size_t v = 0; v < p.size(); ++v) p[v] += w * target.position[v];
+    if (normals && !normals->empty() && !target.normal.empty()) {
+      for (size_t v = 0; v < normals->size(); ++v) (*normals)[v] += w * target.normal[v];
+    }
+  }
+  return p;
+}
+
+std::vector<glm::vec3> GltfModel::skinned_positions(int mesh, int skin, const std::vector<glm::mat4>& node_world,
+                                                    const std::vector<glm::vec3>* base, std::vector<glm::vec3>* normals) const {
   const GltfMesh& m = meshes.at(static_cast<size_t>(mesh));
   const GltfSkin& s = skins.at(static_cast<size_t>(skin));
+  const std::vector<glm::vec3>& in = base ? *base : m.positions;
   std::vector<glm::mat4> joint(s.joints.size());
   for (size_t j = 0; j < joint.size(); ++j) joint[j] = node_world.at(static_cast<size_t>(s.joints[j])) * s.inverse_bind[j];
-  std::vector<glm::vec3> out(m.positions.size());
+  const size_t sets = static_cast<size_t>(m.influence_sets);
+  std::vector<glm::vec3> out(in.size());
   for (size_t v = 0; v < out.size(); ++v) {
-    const glm::vec4 w = m.weights[v];
-    const float sum = w.x + w.y + w.z + w.w;
+    glm::mat4 blend(0.0f);
+    float sum = 0.0f;
+    for (size_t k = 0; k < sets; ++k) {
+      const glm::vec4 w = m.weights[v * sets + k];
+      const glm::uvec4 j = m.joints[v * sets + k];
+      for (int c = 0; c < 4; ++c) {
+        if (w[c] == 0.0f) continue;
+        blend += w[c] * joint[j[c]];
+        sum += w[c];
+      }
+    }
     if (!(sum > 0.0f)) {
-      out[v] = m.positions[v];  // no weights: the bind pose
+      out[v] = in[v];  // no weights: the bind pose
       continue;
     }
-    const glm::mat4 blend = (w.x * joint[m.joints[v].x] + w.y * joint[m.joints[v].y] + w.z * joint[m.joints[v].z] +
-                             w.w * joint[m.joints[v].w]) / sum;
-    out[v] = glm::vec3(blend * glm::vec4(m.positions[v], 1.0f));
+    blend /= sum;
+    out[v] = glm::vec3(blend * glm::vec4(in[v], 1.0f));
+    if (normals && v < normals->size()) {
+      const glm::vec3 n = glm::transpose(glm::inverse(glm::mat3(blend))) * (*normals)[v];
+      const float len = glm::length(n);
+      if (len > 0.0f) (*normals)[v] = n / len;
+    }
   }
   return out;
 }

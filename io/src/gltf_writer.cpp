@@ -89,9 +89,11 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
           hi = glm::max(hi, v);
           if (gm.skinned()) {
             const uint32_t i = gm.indices[t][c];
+            // the first influence set (the project's models have one)
+            const size_t sets = static_cast<size_t>(gm.influence_sets);
             for (int k = 0; k < 4; ++k) {
-              joints.push_back(static_cast<uint16_t>(gm.joints[i][k]));
-              weights.push_back(gm.weights[i][k]);
+              joints.push_back(static_cast<uint16_t>(gm.joints[i * sets][k]));
+              weights.push_back(gm.weights[i * sets][k]);
             }
           }
         }
@@ -239,6 +241,7 @@ GltfModel make_bending_tube(float length, float width, const glm::vec3& color) {
   m.materials[1].base_color = color;
   m.materials[1].roughness = 0.7f;
   GltfMesh mesh;
+  mesh.influence_sets = 1;
   constexpr int kRings = 12;
   const float h = 0.5f * width;
   const glm::vec2 corner[4] = {{-h, -h}, {h, -h}, {h, h}, {-h, h}};

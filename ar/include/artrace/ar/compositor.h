@@ -22,10 +22,44 @@
 
 namespace artrace::ar {
 
+/// What a virtual surface looks like at one point (the material lookup fills it per hit).
+///   - kDiffuse without `pbr`: Lambert, as the project's own models and the AR scene's "diffuse"
+///     override have it;
+///   - kDiffuse with `pbr`: glTF's metallic-roughness: a Lambert lobe for the dielectric part and
+///     a GGX specular lobe (Walter et al., "Microfacet Models for Refraction through Rough
+///     Surfaces", EGSR 2007; Smith-Schlick masking, Schlick's Fresnel from F0 = 0.04 for
+///     dielectrics and the base colour for metals) for the point lights; the ambient light
+///     reflected as F0 (a uniform white environment); a mirror reflection ray, weighted by
+///     Fresnel, that fades in as roughness falls below 0.2 (a perfect mirror at roughness 0);
+///   - kMirror: a perfect mirror tinted by `color`; kGlass: Fresnel-weighted reflection and
+///     refraction.
 struct VirtualMaterial {
   enum Kind { kDiffuse, kMirror, kGlass } kind = kDiffuse;
-  glm::vec3 color{0.8f};  ///< linear RGB
+  glm::vec3 color{0.8f};  ///< base colour, linear RGB (factor x texture x vertex colour)
   float ior = 1.5f;
+  bool pbr = false;       ///< metallic-roughness shading (see above)
+  float metallic = 0.0f;
+  float roughness = 1.0f;
+  glm::vec3 emissive{0.0f};  ///< added to the shaded colour (linear RGB)
+  float occlusion = 1.0f;    ///< ambient occlusion: scales the ambient term
+  /// Coverage in [0, 1] (glTF alpha BLEND): below 1 the surface is blended over what lies behind it.
+  float alpha = 1.0f;
+  /// Rays pass through this point as if nothing were there (glTF alpha MASK below its cutoff, or a
+  /// back face of a single-sided material): camera, shadow and secondary rays alike.
+  bool cutout = false;
+  /// Shading normal in world space (interpolated vertex normals, normal maps); zero: the geometric
+  /// normal. It is turned to the side the ray comes from, as the geometric normal is.
+  glm::vec3 normal{0.0f};
+};
+
+/// A hit as the material lookup sees it: the hit, the ray's direction, and the width of the ray
+/// cone there (world units, for the textures' level of detail).
+struct SurfaceQuery : core::Hit {
+  SurfaceQuery() = default;
+  explicit SurfaceQuery(const core::Hit& h) : core::Hit(h) {}
+  glm::vec3 dir{0.0f, 0.0f, 1.0f};
+  float cone_width = 0.0f;
+  bool shadow_ray = false;  ///< asked by a shadow ray (back faces of single-sided surfaces still cast shadows)
 };
 
 /// The share of light a surface of `m` lets through to a shadow ray: glass passes what Fresnel
@@ -53,6 +87,9 @@ struct CompositeOptions {
   std::vector<core::Aabb> object_bounds;
   float ambient = 0.3f;
   std::vector<VirtualLight> lights;  ///< empty: one light estimated from the frame
+  /// Some material has cut-outs or blends (alpha MASK or BLEND): rays then walk past cut-out
+  /// points, and shadow rays ask the material at every surface they cross.
+  bool alpha_tested = false;
   int threads = 0;
 };
 
@@ -64,7 +101,8 @@ struct CompositeStats {
   double proxy_ms = 0.0, real_shadow_ms = 0.0;
 };
 
-using MaterialLookup = std::function<VirtualMaterial(const core::Hit&)>;
+/// The material at a hit. A lookup taking `const core::Hit&` serves too (a SurfaceQuery is a Hit).
+using MaterialLookup = std::function<VirtualMaterial(const SurfaceQuery&)>;
 
 /// The composited colour frame. `scene` must be committed, in the recording's world coordinates.
 ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene, const MaterialLookup& material,

@@ -4,7 +4,8 @@
 //     "models": [
 //       { "file": "models/box.gltf", "position": [0, 0.76, 0], "rotation_deg": [0, 30, 0],
 //         "scale": 1.0 | [sx, sy, sz], "animation": { "clip": 0 | "name", "speed": 1.0 },
-//         "material": { "kind": "diffuse" | "mirror" | "glass", "base_color": [r, g, b], "ior": 1.5 } }
+//         "material": { "kind": "diffuse" | "mirror" | "glass", "base_color": [r, g, b], "ior": 1.5,
+//                       "metallic": 0.0, "roughness": 0.5 } }
 //     ],
 //     "lights": [ { "position": [x, y, z], "color": [r, g, b] } ],
 //     "ambient": 0.3
@@ -35,8 +36,9 @@ struct ArModelPlacement {
   int clip = -1;      ///< -1: no animation
   float speed = 1.0f;
   std::optional<SurfaceKind> kind;
-  std::optional<glm::vec3> base_color;
+  std::optional<glm::vec3> base_color;  ///< replaces the base colour and its texture
   std::optional<float> ior;
+  std::optional<float> metallic, roughness;
 
   glm::mat4 world_from_model() const;
 };
@@ -67,21 +69,30 @@ namespace artrace::io {
 /// The virtual objects of an AR scene file in a two-level scene, as the paper's three kinds:
 /// models without animation go into the static kd-tree (in world space, built once); meshes under
 /// animated nodes are rigid instances whose transforms the node animation drives (hierarchically
-/// transformed objects); skinned meshes are deformable meshes whose vertices are skinned and
-/// refit every update.
+/// transformed objects); skinned meshes, and meshes whose morph weights are animated, are
+/// deformable meshes whose vertices are recomputed and refit every update.
+///
+/// Materials are looked up per hit (material()): base colour, metallic, roughness, occlusion and
+/// emissive textures sampled at the interpolated texture coordinates with a ray-cone level of
+/// detail, vertex colours, interpolated normals and normal maps (tangents from TANGENT, or from the
+/// texture coordinates), alpha MASK as cut-outs and BLEND as coverage; the placement's material
+/// override on top. Single-sided surfaces are seen from both sides: a ray tracer meets back faces
+/// only inside closed models or at open ones, where culling them would show holes.
 class ArRuntime {
  public:
   explicit ArRuntime(const ArSceneFile& scene);
   /// Moves the animated models to recording time t (seconds) and commits. Returns milliseconds.
   double update(double time_s);
   const core::TwoLevelScene& scene() const { return scene_; }
-  ar::VirtualMaterial material(const core::Hit& hit) const;
+  ar::VirtualMaterial material(const ar::SurfaceQuery& hit) const;
   std::vector<ar::VirtualLight> lights() const;
   float ambient() const { return file_.ambient; }
+  /// Whether some material cuts out or blends (ar::CompositeOptions::alpha_tested).
+  bool alpha_tested() const { return alpha_tested_; }
   /// How many triangles went into each kind.
   size_t static_triangles() const { return static_parts_.size(); }
   size_t instance_count() const { return parts_.size(); }
-  size_t skinned_meshes() const { return skinned_.size(); }
+  size_t skinned_meshes() const { return deforming_.size(); }
   /// World box of every placed model at the last update (for ar::CompositeOptions::object_bounds).
   const std::vector<core::Aabb>& object_bounds() const { return bounds_; }
 
@@ -94,14 +105,17 @@ class ArRuntime {
     core::Aabb object_box;  ///< of the mesh, in its own space
   };
   struct StaticTriangle {
-    uint32_t placement, mesh, triangle;
+    uint32_t placement, mesh, triangle, xform;  ///< xform: into static_xforms_
   };
-  struct Skinned {
+  struct Deforming {
     size_t placement;
-    int node, mesh, skin;
+    int node, mesh, skin;  ///< skin -1: morph targets only
     core::DeformableHandle handle;
+    std::vector<glm::vec3> normals;  ///< world space, at the last update (empty: flat)
   };
-  ar::VirtualMaterial material_of(size_t placement, int mesh, uint32_t triangle) const;
+  /// The part of a hit's material that does not depend on where in the triangle it is: the
+  /// placement's overrides applied to the glTF material's factors.
+  ar::VirtualMaterial triangle_material(size_t placement, int mesh, uint32_t triangle) const;
   /// Each triangle's share of light let through to shadow rays (ar::shadow_transmittance); empty
   /// when none of the mesh is glass.
   std::vector<float> glass_pass(size_t placement, int mesh) const;
@@ -110,9 +124,12 @@ class ArRuntime {
   core::TwoLevelScene scene_{core::TwoLevelScene::Config::kKdTreeBvh};
   std::vector<Part> parts_;  ///< indexed by instance slot
   std::vector<StaticTriangle> static_parts_;  ///< indexed by static triangle
-  std::vector<Skinned> skinned_;  ///< indexed by deformable slot
+  std::vector<glm::mat4> static_xforms_;      ///< world from mesh of the static parts
+  std::vector<Deforming> deforming_;          ///< indexed by deformable slot
   std::vector<core::Aabb> static_bounds_;  ///< per placement: its static triangles
   std::vector<core::Aabb> bounds_;         ///< per placement, at the last update
+  std::vector<std::vector<ar::Texture>> textures_;  ///< per placement, per image: [2 i] linear, [2 i + 1] sRGB
+  bool alpha_tested_ = false;
 };
 
 }  // namespace artrace::io
