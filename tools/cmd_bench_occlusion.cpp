@@ -6,7 +6,10 @@
 #include "artrace/ar/occlusion.h"
 #include "artrace/ar/pinhole_intrinsics.h"
 #include "artrace/core/two_level_scene.h"
+#include "artrace/io/fusion.h"
 #include "artrace/io/synth.h"
+
+#include "artrace/ar/compositor.h"
 
 #include <cstdio>
 #include <limits>
@@ -29,6 +32,14 @@ struct Options {
   std::string scene, json, debug_png;
   int frames = 30, width = 640, height = 480, threads = 0;
   std::vector<float> box_lo{-0.45f, 0.0f, -1.3f}, box_hi{-0.05f, 1.1f, -0.75f};
+  bool fuse = false;
+  int debug_frame = -1;
+  io::FusionOptions fusion = [] {
+    io::FusionOptions f;
+    f.max_depth_m = 8.0;  // the room is 4-7 m from the camera; the depth model reads to 8 m
+    return f;
+  }();
+  ar::OcclusionOptions occlusion;
 };
 
 void run(const Options& opt) {
@@ -46,13 +57,50 @@ void run(const Options& opt) {
                                             {opt.box_hi[0], opt.box_hi[1], opt.box_hi[2]})), glm::mat4(1.0f));
   virt.commit();
 
-  std::vector<double> iou, boundary, outline, jitter, ms;
-  int over_1px = 0;
-  std::vector<uint8_t> prev_truth, prev_covered;
-  std::vector<float> prev_alpha;
+  // the frames first: the fused room (when asked for) integrates them all before any is judged
+  std::vector<ar::SensorFrame> truth_frames, frames;
   for (int k = 0; k < opt.frames; ++k) {
-    const ar::SensorFrame truth_frame = exact.render(k);
-    const ar::SensorFrame f = noisy.render(k);
+    truth_frames.push_back(exact.render(k));
+    frames.push_back(noisy.render(k));
+  }
+  std::unique_ptr<ar::FusedRoom> room;
+  double fuse_s = 0.0;
+  if (opt.fuse) {
+    ar::FrameList list(frames, "the noisy synthetic recording");
+    io::FusionStats fs;
+    io::FusionOptions fo = opt.fusion;
+    room = std::make_unique<ar::FusedRoom>(io::fuse_recording(list, fo, &fs));
+    fuse_s = fs.seconds;
+  }
+  struct Figures {
+    std::vector<double> iou, boundary, outline, jitter, ms;
+    int over_1px = 0;
+    std::vector<uint8_t> prev_truth, prev_covered;
+    std::vector<float> prev_alpha;
+  };
+  Figures sensor, fused;
+  auto judge = [&](Figures& fig, const std::vector<float>& alpha, const std::vector<uint8_t>& truth, const std::vector<uint8_t>& covered, double ms) {
+    fig.ms.push_back(ms);
+    const ar::MaskScore s = ar::score_mask(alpha, truth, covered, opt.width, opt.height);
+    fig.iou.push_back(s.iou);
+    fig.outline.push_back(s.outline_boundary_px);
+    if (s.boundary_pixels > 0) {
+      fig.boundary.push_back(s.boundary_px);
+      fig.over_1px += s.boundary_px > 1.0;
+    }
+    if (!fig.prev_truth.empty()) {
+      if (const auto j = ar::occlusion_jitter(fig.prev_alpha, alpha, fig.prev_truth, truth, fig.prev_covered, covered, opt.width, opt.height)) {
+        fig.jitter.push_back(*j);
+      }
+    }
+    fig.prev_truth = truth;
+    fig.prev_alpha = alpha;
+    fig.prev_covered = covered;
+    return s;
+  };
+  for (int k = 0; k < opt.frames; ++k) {
+    const ar::SensorFrame& truth_frame = truth_frames[static_cast<size_t>(k)];
+    const ar::SensorFrame& f = frames[static_cast<size_t>(k)];
     const core::Camera cam = ar::make_camera(f.color_intrinsics, *f.world_from_camera);
     std::vector<float> zv(static_cast<size_t>(opt.width) * opt.height, std::numeric_limits<float>::infinity());
     core::for_each_tile(opt.width, opt.height, opt.threads, [&](const core::Tile& t) {
@@ -62,24 +110,21 @@ void run(const Options& opt) {
           if (h.valid()) zv[static_cast<size_t>(y) * opt.width + x] = h.t;
         }
     });
-    const auto t0 = std::chrono::steady_clock::now();
-    const std::vector<float> alpha = ar::occlusion_alpha(f.depth, f.color, zv);
-    ms.push_back(ms_since(t0));
     const std::vector<uint8_t> truth = ar::exact_visibility(truth_frame.depth, zv);
     const std::vector<uint8_t> covered = ar::covered_pixels(zv);
-    const ar::MaskScore s = ar::score_mask(alpha, truth, covered, opt.width, opt.height);
-    iou.push_back(s.iou);
-    outline.push_back(s.outline_boundary_px);
-    if (s.boundary_pixels > 0) {
-      boundary.push_back(s.boundary_px);
-      over_1px += s.boundary_px > 1.0;
+    auto t0 = std::chrono::steady_clock::now();
+    std::vector<float> alpha = ar::occlusion_alpha(f.depth, f.color, zv, opt.occlusion);
+    ar::MaskScore s = judge(sensor, alpha, truth, covered, ms_since(t0));
+    if (room) {
+      t0 = std::chrono::steady_clock::now();
+      ar::CompositeOptions co;
+      co.room = room.get();
+      co.threads = opt.threads;
+      const ar::DepthImage clean = ar::clean_depth(f, co, 0, 0, opt.width, opt.height);
+      alpha = ar::occlusion_alpha(clean, f.color, zv, opt.occlusion);  // the picture shows this one
+      s = judge(fused, alpha, truth, covered, ms_since(t0));
     }
-    if (!prev_truth.empty()) {
-      if (const auto j = ar::occlusion_jitter(prev_alpha, alpha, prev_truth, truth, prev_covered, covered, opt.width, opt.height)) {
-        jitter.push_back(*j);
-      }
-    }
-    if (!opt.debug_png.empty() && k == opt.frames / 2) {
+    if (!opt.debug_png.empty() && k == (opt.debug_frame >= 0 ? opt.debug_frame : opt.frames / 2)) {
       // grey: the recording; green: virtual and right; red: shown but hidden in truth; blue: the reverse
       core::Image img(opt.width, opt.height);
       for (size_t i = 0; i < truth.size(); ++i) {
@@ -94,26 +139,31 @@ void run(const Options& opt) {
       write_png(img, opt.debug_png);
       std::printf("frame %d: %d shown wrongly, %d hidden wrongly\n", k, s.false_visible, s.false_hidden);
     }
-    prev_truth = truth;
-    prev_alpha = alpha;
-    prev_covered = covered;
   }
   auto worst = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); };
-  const nlohmann::json out{{"scene", opt.scene}, {"frames", opt.frames}, {"width", opt.width}, {"height", opt.height},
-                           {"iou", median(iou)}, {"iou_min", *std::min_element(iou.begin(), iou.end())},
-                           {"boundary_px", median(boundary)}, {"boundary_px_worst", worst(boundary)},
-                           {"boundary_frames", boundary.size()}, {"boundary_frames_over_1px", over_1px},
-                           {"jitter_px", median(jitter)}, {"jitter_px_worst", worst(jitter)},
-                           {"outline_boundary_px", median(outline)},
-                           {"occlusion_ms_median", median(ms)}};
-  std::printf("bench-occlusion %s, %d frames %dx%d, Kinect-like depth:\n"
-              "  IoU %.4f (min %.4f)\n"
-              "  occlusion boundary %.3f px (worst frame %.3f; %d of %zu frames over 1 px)\n"
-              "  jitter %.3f px (worst %.3f) per pixel of true occlusion boundary\n"
-              "  outline-inclusive one-sided boundary (the earlier figure) %.3f px\n"
-              "  occlusion %.2f ms/frame (medians over frames)\n",
-              opt.scene.c_str(), opt.frames, opt.width, opt.height, median(iou), out["iou_min"].get<double>(), median(boundary),
-              worst(boundary), over_1px, boundary.size(), median(jitter), worst(jitter), median(outline), median(ms));
+  auto figures = [&](const Figures& f) {
+    return nlohmann::json{{"iou", median(f.iou)}, {"iou_min", f.iou.empty() ? 0.0 : *std::min_element(f.iou.begin(), f.iou.end())},
+                          {"boundary_px", median(f.boundary)}, {"boundary_px_worst", worst(f.boundary)},
+                          {"boundary_frames", f.boundary.size()}, {"boundary_frames_over_1px", f.over_1px},
+                          {"jitter_px", median(f.jitter)}, {"jitter_px_worst", worst(f.jitter)},
+                          {"outline_boundary_px", median(f.outline)}, {"occlusion_ms_median", median(f.ms)},
+                          {"per_frame_iou", f.iou}, {"per_frame_boundary_px", f.boundary}};
+  };
+  auto print = [&](const char* what, const Figures& f) {
+    std::printf("  %s: IoU %.4f (min %.4f), occlusion boundary %.3f px (worst frame %.3f; %d of %zu frames over 1 px), "
+                "jitter %.3f px (worst %.3f), earlier outline-inclusive figure %.3f px, %.2f ms/frame\n",
+                what, median(f.iou), f.iou.empty() ? 0.0 : *std::min_element(f.iou.begin(), f.iou.end()), median(f.boundary), worst(f.boundary),
+                f.over_1px, f.boundary.size(), median(f.jitter), worst(f.jitter), median(f.outline), median(f.ms));
+  };
+  nlohmann::json out{{"scene", opt.scene}, {"frames", opt.frames}, {"width", opt.width}, {"height", opt.height}, {"sensor_depth", figures(sensor)}};
+  std::printf("bench-occlusion %s, %d frames %dx%d, Kinect-like depth (medians over frames; boundary on the occlusion boundary only, "
+              "symmetric; jitter per pixel of true occlusion boundary):\n", opt.scene.c_str(), opt.frames, opt.width, opt.height);
+  print("sensor depth", sensor);
+  if (room) {
+    out["fused_room"] = figures(fused);
+    out["fuse_seconds"] = fuse_s;
+    print("with the fused room", fused);
+  }
   write_json(opt.json, out);
 }
 
@@ -130,7 +180,20 @@ void add_bench_occlusion_command(CLI::App& app) {
   cmd->add_option("--box-min", opt->box_lo, "virtual box corner (world)")->expected(3)->check(finite_range(-1e6, 1e6));
   cmd->add_option("--box-max", opt->box_hi, "virtual box corner (world)")->expected(3)->check(finite_range(-1e6, 1e6));
   cmd->add_option("--json", opt->json, "write iou, boundary_px, jitter_px as JSON");
-  cmd->add_option("--debug-png", opt->debug_png, "write the middle frame's mask errors as a picture");
+  cmd->add_option("--debug-png", opt->debug_png, "write the mask errors of a frame (the middle one, or --debug-frame) as a picture");
+  cmd->add_option("--debug-frame", opt->debug_frame, "the frame --debug-png shows")->check(CLI::Range(0, 100000));
+  cmd->add_option("--guide-radius", opt->occlusion.guide_radius, "colour-guided refinement: window radius (pixels)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 16));
+  cmd->add_option("--guide-sigma-color", opt->occlusion.guide_sigma_color, "colour-guided refinement: colour sigma (8-bit levels)")
+      ->capture_default_str()
+      ->check(finite_range(0.1, 1000.0));
+  cmd->add_option("--guide-sigma-space", opt->occlusion.guide_sigma_space, "colour-guided refinement: spatial sigma (pixels)")
+      ->capture_default_str()
+      ->check(finite_range(0.1, 100.0));
+  cmd->add_option("--voxel", opt->fusion.voxel_m, "--fuse: voxel edge (m)")->capture_default_str()->check(finite_range(0.001, 1.0));
+  cmd->add_option("--truncation", opt->fusion.truncation_m, "--fuse: TSDF truncation (m)")->capture_default_str()->check(finite_range(0.002, 5.0));
+  cmd->add_flag("--fuse", opt->fuse, "also measure with the room fused from the noisy frames (artrace fuse) cleaning the depth");
   cmd->callback([opt] { run(*opt); });
 }
 

@@ -4,7 +4,7 @@
 #include "bench_util.h"
 #include "commands.h"
 #include "frame_views.h"
-#include "recording_options.h"
+#include "ar_session.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
@@ -28,24 +28,20 @@ std::atomic<bool> g_interrupted{false};
 extern "C" void on_sigint(int) { g_interrupted = true; }
 
 struct Options {
-  std::string recording, scene, output;
-  int first = 0, last = -1, threads = 0;
+  std::string recording, output;
+  ArArgs ar;
+  int first = 0, last = -1;
   double fps = 30.0;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
-  RecordingArgs rec;
 };
 
 void run(const Options& opt) {
-  const io::ArSceneFile scene_file = io::load_ar_scene(opt.scene);
-  for (const io::GltfModel& m : scene_file.loaded) {
-    for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  }
-  io::ArRuntime runtime(scene_file);
-  auto source = open_recording(opt.recording, opt.rec, opt.quiet);
-  const int64_t count = source->frame_count().value_or(0);
+  ArSession session(opt.recording, opt.ar, opt.quiet);
+  ar::FrameSource& source = session.source();
+  const int64_t count = source.frame_count().value_or(0);
   const int64_t last = opt.last >= 0 ? std::min<int64_t>(opt.last, count - 1) : count - 1;
   if (opt.first < 0 || opt.first > last) throw std::invalid_argument("frame range " + std::to_string(opt.first) + ".." + std::to_string(last) + " is empty");
-  source->seek(opt.first);
+  source.seek(opt.first);
 
   const std::filesystem::path out(opt.output);
   const std::string ext = out.extension().string();
@@ -62,45 +58,30 @@ void run(const Options& opt) {
     std::filesystem::remove_all(partial, ec);
   };
 
-  ar::CompositeOptions copt;
+  ar::CompositeOptions& copt = session.options();
   copt.occlusion = !opt.no_occlusion;
   copt.shadows = !opt.no_shadows;
-  copt.lights = runtime.lights();
-  copt.ambient = runtime.ambient();
-  copt.alpha_tested = runtime.alpha_tested();
-  copt.threads = opt.threads;
   g_interrupted = false;
   auto previous = std::signal(SIGINT, on_sigint);
   const int64_t total = last - opt.first + 1;
   const auto start = std::chrono::steady_clock::now();
   std::vector<double> real_rays;
   std::vector<double> frame_ms, read_ms, update_ms, proxy_ms, trace_ms, shadow_ms, occlusion_ms, blend_ms, write_ms;
-  ar::DepthProxy proxy;
-  copt.proxy = &proxy;
   try {
     // the next frame is read (decoded) on another thread while this one is composited
-    auto read_next = [&source, &read_ms](ar::SensorFrame& into) {
-      const auto tr = std::chrono::steady_clock::now();
-      const bool ok = source->next(into);
-      read_ms.push_back(ms_since(tr));
-      return ok;
-    };
-    ar::SensorFrame f, ahead;
-    std::future<bool> pending = std::async(std::launch::async, read_next, std::ref(ahead));
+    FrameReader reader(source);
+    ar::SensorFrame f;
     for (int64_t k = 0; k < total; ++k) {
-      if (g_interrupted) {
-        pending.wait();
-        throw std::runtime_error("interrupted: " + out.string() + " was not written");
-      }
-      if (!pending.get()) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
-      std::swap(f, ahead);
-      if (k + 1 < total) pending = std::async(std::launch::async, read_next, std::ref(ahead));
+      if (g_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
+      double rm = 0.0;
+      if (!reader.next(f, &rm)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
+      read_ms.push_back(rm);
       const auto t0 = std::chrono::steady_clock::now();
-      update_ms.push_back(runtime.update(f.color_time_s));
-      copt.object_bounds = runtime.object_bounds();
       ar::CompositeStats st;
-      const ar::ColorImage c = ar::composite(f, runtime.scene(), [&](const ar::SurfaceQuery& q) { return runtime.material(q); }, copt, &st);
-      proxy_ms.push_back(st.proxy_ms);
+      double um = 0.0;
+      const ar::ColorImage c = session.composite(f, &st, &um);
+      update_ms.push_back(um);
+      proxy_ms.push_back(st.proxy_ms + st.real_depth_ms);
       trace_ms.push_back(st.trace_ms);
       shadow_ms.push_back(st.real_shadow_ms);
       real_rays.push_back(st.shadow_rays_real);
@@ -148,7 +129,7 @@ void run(const Options& opt) {
   std::printf("%s: %lld frames in %.2f s (%.1f frames/s, %.1f ms median per frame)\n", out.string().c_str(),
               static_cast<long long>(total), s, total / std::max(s, 1e-9), median(frame_ms));
   if (!opt.quiet) {
-    std::printf("  medians: read %.1f, update %.1f, depth mesh %.1f, trace %.1f, shadows on real surfaces %.1f, occlusion %.1f, "
+    std::printf("  medians: read %.1f, update %.1f, real scene %.1f, trace %.1f, shadows on real surfaces %.1f, occlusion %.1f, "
                 "blend %.1f, encode %.1f ms; %.0f shadow rays from real points\n",
                 median(read_ms), median(update_ms), median(proxy_ms), median(trace_ms), median(shadow_ms), median(occlusion_ms),
                 median(blend_ms), median(write_ms), median(real_rays));
@@ -161,7 +142,7 @@ void add_export_command(CLI::App& app) {
   auto opt = std::make_shared<Options>();
   CLI::App* cmd = app.add_subcommand("export", "Composite an AR scene into a recording and write a clip");
   cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
-  cmd->add_option("--scene", opt->scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
+  add_ar_options(cmd, opt->ar);
   cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder for numbered PNGs")->required();
   cmd->add_option("--first", opt->first, "first frame")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
@@ -170,8 +151,6 @@ void add_export_command(CLI::App& app) {
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
-  add_threads_option(cmd, opt->threads);
-  add_recording_options(cmd, opt->rec);
   cmd->callback([opt] { run(*opt); });
 
   auto dir = std::make_shared<std::string>();

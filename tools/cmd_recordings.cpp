@@ -6,10 +6,13 @@
 #include "artrace/io/gltf_model.h"
 
 #include "artrace/io/aff_scene.h"
+#include "artrace/io/fusion.h"
 #include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
 #include "artrace/io/oni_reader.h"
 #include "recording_options.h"
+
+#include "artrace/ar/plane_fit.h"
 #include "artrace/io/tum_reader.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/recording.h"
@@ -52,7 +55,20 @@ nlohmann::json info_oni(const std::filesystem::path& path) {
   return j;
 }
 
-nlohmann::json info_recording(const std::filesystem::path& path, const RecordingArgs& args) {
+nlohmann::json planes_json(const ar::SensorFrame& f) {
+  nlohmann::json planes = nlohmann::json::array();
+  for (const ar::Plane& p : ar::detect_planes(f)) {
+    planes.push_back({{"normal", {p.normal.x(), p.normal.y(), p.normal.z()}},
+                      {"point", {p.point.x(), p.point.y(), p.point.z()}},
+                      {"pixel", {p.pixel_u, p.pixel_v}},
+                      {"area_m2", p.area_m2},
+                      {"inliers", p.inliers},
+                      {"rms_m", p.rms_m}});
+  }
+  return planes;
+}
+
+nlohmann::json info_recording(const std::filesystem::path& path, const RecordingArgs& args, int planes_frame = -1) {
   nlohmann::json j;
   j["kind"] = "recording";
   const bool oni = !std::filesystem::is_directory(path);
@@ -99,6 +115,15 @@ nlohmann::json info_recording(const std::filesystem::path& path, const Recording
     if (reader->registered()) j["depth_registered_to_colour"] = *reader->registered();
   }
   j["warnings"] = src->warnings();
+  if (planes_frame >= 0) {
+    const int64_t n = src->frame_count().value_or(0);
+    if (planes_frame >= n) throw std::invalid_argument("--frame " + std::to_string(planes_frame) + ": the recording has " + std::to_string(n) + " frames");
+    src->seek(planes_frame);
+    ar::SensorFrame f;
+    if (!src->next(f)) throw io::ParseError(path.string(), 0, 0, "cannot read frame " + std::to_string(planes_frame));
+    j["planes_frame"] = planes_frame;
+    j["planes"] = planes_json(f);
+  }
   return j;
 }
 
@@ -291,20 +316,59 @@ void add_recording_commands(CLI::App& app) {
     auto path = std::make_shared<std::string>();
     auto json = std::make_shared<std::string>();
     auto rec = std::make_shared<RecordingArgs>();
+    auto planes = std::make_shared<bool>(false);
+    auto frame = std::make_shared<int>(0);
     CLI::App* cmd = app.add_subcommand("info", "What a recording, ONI file, AFF scene, glTF model or AR scene holds, or why it cannot be read");
     cmd->add_option("path", *path, "TUM folder, image folder, .oni file, .aff scene, .gltf/.glb model or AR scene .json")->required();
     cmd->add_option("--json", *json, "also write the answer as JSON");
     add_recording_options(cmd, *rec);
-    cmd->callback([path, json, rec] {
+    cmd->add_flag("--planes", *planes, "recordings: list the large planar surfaces of a frame (world coordinates), to anchor models on");
+    cmd->add_option("--frame", *frame, "the frame --planes looks at")->capture_default_str()->check(CLI::Range(0, 100000000));
+    cmd->callback([path, json, rec, planes, frame] {
       const std::filesystem::path p(*path);
       const std::string ext = p.extension().string();
       const nlohmann::json j = ext == ".aff"                      ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
                                : ext == ".json"                  ? info_ar_scene(p)
-                                                                 : info_recording(p, *rec);
+                                                                 : info_recording(p, *rec, *planes ? *frame : -1);
       std::cout << *path << "\n";
       for (const auto& [key, value] : j.items()) std::cout << "  " << key << ": " << value.dump() << "\n";
       write_json(*json, j);
+    });
+  }
+  {
+    struct Options {
+      std::string source, output, json;
+      io::FusionOptions fusion;
+      RecordingArgs rec;
+      bool quiet = false;
+    };
+    auto opt = std::make_shared<Options>();
+    CLI::App* cmd = app.add_subcommand("fuse", "Fuse every frame of a recording with its pose into a mesh of the room (TSDF, Open3D)");
+    cmd->add_option("source", opt->source, "TUM folder, image folder or .oni file (with poses: a trajectory, or a fixed camera)")->required();
+    cmd->add_option("-o,--output", opt->output, "the mesh to write (.ply)")->required();
+    cmd->add_option("--voxel", opt->fusion.voxel_m, "voxel edge, metres")->capture_default_str()->check(finite_range(0.001, 1.0));
+    cmd->add_option("--truncation", opt->fusion.truncation_m, "signed distances are cut off beyond this, metres")
+        ->capture_default_str()
+        ->check(finite_range(0.002, 5.0));
+    cmd->add_option("--max-depth", opt->fusion.max_depth_m, "depths beyond are left out, metres")->capture_default_str()->check(finite_range(0.1, 100.0));
+    cmd->add_option("--every", opt->fusion.every, "integrate every n-th frame")->capture_default_str()->check(CLI::Range(1, 100000));
+    cmd->add_option("--json", opt->json, "write the figures as JSON");
+    cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
+    add_recording_options(cmd, opt->rec);
+    cmd->callback([opt] {
+      auto in = open_recording(opt->source, opt->rec, opt->quiet);
+      io::FusionStats st;
+      const ar::RoomMesh mesh = io::fuse_recording(*in, opt->fusion, &st, [&](int k, int n) {
+        if (!opt->quiet) std::fprintf(stderr, "\rfusing frame %d/%d   ", k, n);
+      });
+      if (!opt->quiet) std::fprintf(stderr, "\n");
+      io::write_room_ply(mesh, opt->output);
+      std::printf("%s: %zu triangles, %zu vertices from %d frames (%d without a pose skipped) in %.2f s\n", opt->output.c_str(),
+                  mesh.triangles.size(), mesh.positions.size(), st.frames, st.without_pose, st.seconds);
+      write_json(opt->json, {{"source", opt->source}, {"output", opt->output}, {"frames", st.frames}, {"without_pose", st.without_pose},
+                             {"triangles", mesh.triangles.size()}, {"vertices", mesh.positions.size()}, {"seconds", st.seconds},
+                             {"voxel_m", opt->fusion.voxel_m}});
     });
   }
   {

@@ -8,7 +8,7 @@
 // trace, composite). Without a display it says so and points to `artrace export`.
 #include "bench_util.h"
 #include "commands.h"
-#include "recording_options.h"
+#include "ar_session.h"
 #include "frame_views.h"
 
 #include "artrace/ar/compositor.h"
@@ -63,11 +63,11 @@ bool display_available(std::string& why) {
 }
 
 struct Options {
-  std::string recording, scene, screenshot, keys;
-  int threads = 0, frames = 0;
+  std::string recording, screenshot, keys;
+  ArArgs ar;
+  int frames = 0;
   double speed = 1.0;
   bool loop = false;
-  RecordingArgs rec;
 };
 
 enum class View { kComposite, kSideBySide, kDepth };
@@ -79,16 +79,9 @@ struct Timing {
 class Replay {
  public:
   explicit Replay(const Options& opt)
-      : opt_(opt), scene_file_(io::load_ar_scene(opt.scene)), runtime_(scene_file_), source_(open_recording(opt.recording, opt.rec)) {
-    count_ = source_->frame_count().value_or(0);
+: opt_(opt), session_(opt.recording, opt.ar), reader_(session_.source()), copt_(session_.options()) {
+    count_ = session_.source().frame_count().value_or(0);
     if (count_ <= 0) throw std::runtime_error(opt.recording + ": no frames");
-    for (const io::GltfModel& m : scene_file_.loaded) {
-      for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-    }
-    copt_.lights = runtime_.lights();
-    copt_.ambient = runtime_.ambient();
-    copt_.alpha_tested = runtime_.alpha_tested();
-    copt_.threads = opt.threads;
   }
 
   int run() {
@@ -209,9 +202,8 @@ class Replay {
   }
 
   void read_next() {
-    const auto t0 = std::chrono::steady_clock::now();
-    if (!source_->next(frame_)) throw std::runtime_error(opt_.recording + ": ended at frame " + std::to_string(index_ + 1));
-    timing_.read = ms_since(t0);
+    // decoded on the reader's own thread while the previous frame was composited and shown
+    if (!reader_.next(frame_, &timing_.read)) throw std::runtime_error(opt_.recording + ": ended at frame " + std::to_string(index_ + 1));
     ++index_;
     if (index_ == 0) first_time_ = frame_.color_time_s;
     if (index_ > furthest_) {
@@ -223,21 +215,18 @@ class Replay {
   }
 
   void seek(int64_t index) {
-    source_->seek(index);
+    reader_.seek(index);
     index_ = index - 1;
     read_next();
   }
 
   void render() {
     const auto t0 = std::chrono::steady_clock::now();
-    timing_.update = runtime_.update(frame_.color_time_s);
-    copt_.object_bounds = runtime_.object_bounds();
-    copt_.proxy = &proxy_;
     ar::CompositeStats st;
-    const ar::ColorImage c =
-        ar::composite(frame_, runtime_.scene(), [&](const ar::SurfaceQuery& q) { return runtime_.material(q); }, copt_, &st);
+    const ar::ColorImage c = session_.composite(frame_, &st, &timing_.update);
     timing_.trace = st.trace_ms;
-    timing_.composite = st.proxy_ms + st.real_shadow_ms + st.occlusion_ms + st.composite_ms;  // depth mesh, shadows on real surfaces, occlusion, blend
+    // the real scene (depth mesh or cleaned depth), shadows on real surfaces, occlusion, blend
+    timing_.composite = st.proxy_ms + st.real_depth_ms + st.real_shadow_ms + st.occlusion_ms + st.composite_ms;
     cv::Mat img = to_bgr(c);
     if (view_mode_ == View::kDepth) {
       img = depth_view(frame_.depth, c.width, c.height);
@@ -294,11 +283,9 @@ class Replay {
   }
 
   const Options& opt_;
-  io::ArSceneFile scene_file_;
-  io::ArRuntime runtime_;
-  std::unique_ptr<ar::FrameSource> source_;
-  ar::CompositeOptions copt_;
-  ar::DepthProxy proxy_;
+  ArSession session_;
+  FrameReader reader_;
+  ar::CompositeOptions& copt_;
   ar::SensorFrame frame_;
   int64_t count_ = 0, index_ = -1, furthest_ = 0;
   double first_time_ = 0, last_time_ = 0, next_time_ = 0;
@@ -318,22 +305,20 @@ void add_replay_command(CLI::App& app) {
       "Play a recording with the AR overlay in a window. Keys: space pause, n/p step, [/] seek 1 s, o occlusion, "
       "s shadows, d depth view, b side by side, w save PNG, h help, q quit");
   cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
-  cmd->add_option("--scene", opt->scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
+  add_ar_options(cmd, opt->ar);
   cmd->add_option("--speed", opt->speed, "playback speed relative to the recording's rate")
       ->capture_default_str()
       ->check(finite_range(0.01, 100.0));
   cmd->add_flag("--loop", opt->loop, "start again at the end (otherwise it pauses on the last frame)");
-  add_threads_option(cmd, opt->threads);
   cmd->add_option("--frames", opt->frames, "quit after showing this many frames (0: run until q)")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--keys", opt->keys, "keys to press first, one per shown frame (e.g. \"o\" starts without occlusion)");
   cmd->add_option("--screenshot", opt->screenshot, "on quitting, save the last view (with its head-up display) as PNG");
-  add_recording_options(cmd, opt->rec);
   cmd->callback([opt] {
     std::string why;
     if (!display_available(why)) {
       throw std::runtime_error("replay needs a window: " + why +
                                ". To write the composited clip to a file instead, run: artrace export " + opt->recording +
-                               " --scene " + opt->scene + " -o clip.mp4");
+                               " --scene " + opt->ar.scene + " -o clip.mp4");
     }
     Replay(*opt).run();
   });

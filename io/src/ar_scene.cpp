@@ -61,6 +61,7 @@ class Checker {
 }  // namespace
 
 glm::mat4 ArModelPlacement::world_from_model() const {
+  if (anchored) return glm::scale(*anchored, scale);
   glm::mat4 m = glm::translate(glm::mat4(1.0f), position);
   m = glm::rotate(m, glm::radians(rotation_deg.z), glm::vec3(0, 0, 1));
   m = glm::rotate(m, glm::radians(rotation_deg.y), glm::vec3(0, 1, 0));
@@ -78,16 +79,20 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
     throw ParseError(path.string(), 0, 0, std::string("not valid JSON: ") + e.what());
   }
   const Checker c(path.string());
-  c.keys(root, "", {"models", "lights", "ambient"});
+  c.keys(root, "", {"models", "lights", "ambient", "room"});
   ArSceneFile out;
   out.file = path;
   if (root.contains("ambient")) out.ambient = c.number(root["ambient"], "ambient");
+  if (root.contains("room")) {
+    out.room = path.parent_path() / c.string(root["room"], "room");
+    if (!std::filesystem::exists(*out.room)) c.fail("room", "no such file: " + out.room->string());
+  }
   if (root.contains("models")) {
     if (!root["models"].is_array()) c.fail("models", "expected an array");
     for (size_t i = 0; i < root["models"].size(); ++i) {
       const json& m = root["models"][i];
       const std::string at = "models[" + std::to_string(i) + "]";
-      c.keys(m, at, {"file", "position", "rotation_deg", "scale", "animation", "material"});
+      c.keys(m, at, {"file", "position", "rotation_deg", "scale", "animation", "material", "anchor"});
       ArModelPlacement p;
       if (!m.contains("file")) c.fail(at + ".file", "missing");
       p.file = path.parent_path() / c.string(m["file"], at + ".file");
@@ -95,6 +100,30 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
       if (m.contains("rotation_deg")) p.rotation_deg = c.vec3(m["rotation_deg"], at + ".rotation_deg");
       if (m.contains("scale")) {
         p.scale = m["scale"].is_number() ? glm::vec3(c.number(m["scale"], at + ".scale")) : c.vec3(m["scale"], at + ".scale");
+      }
+      if (m.contains("anchor")) {
+        const json& a = m["anchor"];
+        const std::string an = at + ".anchor";
+        c.keys(a, an, {"frame", "pixel", "offset", "rotation_deg"});
+        if (m.contains("position") || m.contains("rotation_deg")) {
+          c.fail(an, "an anchored model takes no position or rotation_deg of its own (give anchor.offset and anchor.rotation_deg)");
+        }
+        ArModelPlacement::Anchor k;
+        if (!a.contains("pixel")) c.fail(an + ".pixel", "missing");
+        const json& px = a["pixel"];
+        if (!px.is_array() || px.size() != 2 || !px[0].is_number() || !px[1].is_number()) c.fail(an + ".pixel", "expected 2 numbers");
+        const float u = c.in_range(px[0], an + ".pixel"), v = c.in_range(px[1], an + ".pixel");
+        if (u < 0.0f || v < 0.0f) c.fail(an + ".pixel", "expected pixel coordinates of 0 or more");
+        k.u = static_cast<int>(u);
+        k.v = static_cast<int>(v);
+        if (a.contains("frame")) {
+          const float fr = c.number(a["frame"], an + ".frame");
+          if (fr < 0.0f || fr != std::floor(fr)) c.fail(an + ".frame", "expected a frame index (0 or more)");
+          k.frame = static_cast<int>(fr);
+        }
+        if (a.contains("offset")) k.offset_m = c.number(a["offset"], an + ".offset");
+        if (a.contains("rotation_deg")) k.rotation_deg = c.number(a["rotation_deg"], an + ".rotation_deg");
+        p.anchor = k;
       }
       GltfModel model = load_gltf(p.file);
       if (m.contains("animation")) {
@@ -151,6 +180,52 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
     }
   }
   return out;
+}
+
+void resolve_anchors(ArSceneFile& scene, ar::FrameSource& recording) {
+  bool any = false;
+  for (size_t i = 0; i < scene.models.size(); ++i) {
+    ArModelPlacement& p = scene.models[i];
+    if (!p.anchor) continue;
+    any = true;
+    const std::string at = "models[" + std::to_string(i) + "].anchor";
+    const auto count = recording.frame_count();
+    if (count && p.anchor->frame >= *count) {
+      throw ParseError(scene.file.string(), 0, 0, at + ".frame: the recording has " + std::to_string(*count) + " frames");
+    }
+    ar::SensorFrame f;
+    recording.seek(p.anchor->frame);
+    if (!recording.next(f)) throw ParseError(scene.file.string(), 0, 0, at + ".frame: no frame " + std::to_string(p.anchor->frame));
+    if (p.anchor->u >= f.depth.width || p.anchor->v >= f.depth.height) {
+      throw ParseError(scene.file.string(), 0, 0, at + ".pixel: (" + std::to_string(p.anchor->u) + ", " + std::to_string(p.anchor->v) +
+                                                      ") lies outside the " + std::to_string(f.depth.width) + "x" +
+                                                      std::to_string(f.depth.height) + " depth image");
+    }
+    const std::optional<ar::Plane> plane = ar::plane_at_pixel(f, p.anchor->u, p.anchor->v);
+    if (!plane) {
+      throw ParseError(scene.file.string(), 0, 0, at + ": no plane in the depth around pixel (" + std::to_string(p.anchor->u) + ", " +
+                                                      std::to_string(p.anchor->v) + ") of frame " + std::to_string(p.anchor->frame) +
+                                                      " (too few readings, or no surface holding most of them)");
+    }
+    // +Y the normal, +Z towards the camera along the plane, X = Y x Z
+    const Eigen::Vector3d eye = f.world_from_camera ? Eigen::Vector3d(f.world_from_camera->translation()) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d y = plane->normal;
+    Eigen::Vector3d z = (eye - plane->point) - y * y.dot(eye - plane->point);
+    if (z.norm() < 1e-6) z = y.unitOrthogonal();  // the camera looks straight down the normal
+    z.normalize();
+    const Eigen::Vector3d x = y.cross(z);
+    const Eigen::Vector3d o = plane->point + y * p.anchor->offset_m;
+    glm::mat4 m(1.0f);
+    for (int r = 0; r < 3; ++r) {
+      m[0][r] = static_cast<float>(x[r]);
+      m[1][r] = static_cast<float>(y[r]);
+      m[2][r] = static_cast<float>(z[r]);
+      m[3][r] = static_cast<float>(o[r]);
+    }
+    p.anchored = glm::rotate(m, glm::radians(p.anchor->rotation_deg), glm::vec3(0.0f, 1.0f, 0.0f));
+    p.support = plane;
+  }
+  if (any) recording.seek(0);
 }
 
 }  // namespace artrace::io

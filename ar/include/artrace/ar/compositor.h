@@ -14,6 +14,8 @@
 
 #include "artrace/ar/depth_proxy.h"
 #include "artrace/ar/occlusion.h"
+#include "artrace/ar/plane_fit.h"
+#include "artrace/ar/real_scene.h"
 #include "artrace/ar/sensor_frame.h"
 #include "artrace/core/two_level_scene.h"
 
@@ -82,6 +84,15 @@ struct CompositeOptions {
   bool real_shadows = true;   ///< with `shadows`: the virtual objects' shadows on real surfaces
   bool real_reflections = true;  ///< reflection/refraction rays meet the depth mesh
   DepthProxy* proxy = nullptr;   ///< kept across frames by the caller; null: a local one
+  /// A fused model of the room (real_scene.h), the real scene instead of the per-frame depth mesh:
+  /// reflections and refractions meet it (also outside the view), its depth stands in where the
+  /// sensor saw the same surface noisily or not at all (within 3 sigma of its noise, or a hole),
+  /// its normals serve the shadows on real surfaces, and it shadows the virtual objects.
+  const FusedRoom* room = nullptr;
+  /// Planes the virtual objects stand on (their anchors'): where the sensor's depth lies within 3
+  /// sigma of its noise of one (or has no reading on it, inside the objects' screen bounds), the
+  /// plane's depth is taken, so occlusion does not flicker where an object touches the surface.
+  std::vector<Plane> support_planes;
   /// World boxes of the virtual objects, one per object (tighter than the scene's bounds, so fewer
   /// real points need a shadow ray); empty: the scene's bounds.
   std::vector<core::Aabb> object_bounds;
@@ -91,6 +102,9 @@ struct CompositeOptions {
   /// points, and shadow rays ask the material at every surface they cross.
   bool alpha_tested = false;
   int threads = 0;
+  /// Keep the occlusion's visibility and the virtual depth of every pixel in the stats (tests,
+  /// benchmarks).
+  bool keep_visibility = false;
 };
 
 struct CompositeStats {
@@ -99,6 +113,10 @@ struct CompositeStats {
   int shadowed_real_pixels = 0;  ///< real pixels darkened by a virtual object
   double trace_ms = 0.0, occlusion_ms = 0.0, composite_ms = 0.0;
   double proxy_ms = 0.0, real_shadow_ms = 0.0;
+  double real_depth_ms = 0.0;  ///< the sensor's depth cleaned with the fused room or support planes
+  /// With CompositeOptions::keep_visibility: per pixel, how much of the virtual surface shows
+  /// (occlusion alpha, 0 where there is none), and the virtual surface's depth (+inf: none).
+  std::vector<float> visibility, virtual_depth;
 };
 
 /// The material at a hit. A lookup taking `const core::Hit&` serves too (a SurfaceQuery is a Hit).
@@ -107,6 +125,12 @@ using MaterialLookup = std::function<VirtualMaterial(const SurfaceQuery&)>;
 /// The composited colour frame. `scene` must be committed, in the recording's world coordinates.
 ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene, const MaterialLookup& material,
                      const CompositeOptions& options, CompositeStats* stats = nullptr);
+
+/// The sensor's depth with the fused room and the support planes of `options` where they know the
+/// surface better (see CompositeOptions::room and support_planes), over pixels [x0, x1) x [y0, y1)
+/// (planes fill holes only inside it); `normals` (optional) gets their normals there, zero elsewhere.
+DepthImage clean_depth(const SensorFrame& frame, const CompositeOptions& options, int x0, int y0, int x1, int y1,
+                       std::vector<glm::vec3>* normals = nullptr);
 
 /// The light used when none is given: above the camera, as bright as the frame.
 VirtualLight estimate_light(const SensorFrame& frame);

@@ -9,6 +9,7 @@
 //     leaving the virtual objects meet it and take the recorded colour where they hit.
 #pragma once
 
+#include "artrace/ar/real_scene.h"
 #include "artrace/ar/sensor_frame.h"
 #include "artrace/core/two_level_scene.h"
 
@@ -16,21 +17,21 @@
 
 namespace artrace::ar {
 
-class DepthProxy {
+class DepthProxy : public RealScene {
  public:
   explicit DepthProxy(int step = 4, float max_jump = 0.05f);
 
   /// Takes the frame's depth (registered to the colour camera) and pose. Returns milliseconds.
-  double update(const SensorFrame& frame);
+  double update(const SensorFrame& frame) override;
 
   /// The depth mesh (empty when the frame has no depth).
-  const core::TwoLevelScene& scene() const { return scene_; }
-  bool empty() const { return triangles_ == 0; }
+  const core::TwoLevelScene& scene() const override { return scene_; }
+  bool empty() const override { return triangles_ == 0; }
   size_t triangles() const { return triangles_; }
 
   /// Closest hit of a world-space ray with the depth mesh; the recorded colour there (linear RGB)
   /// when it hits.
-  bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const;
+  bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const override;
 
  private:
   int step_;

@@ -28,8 +28,8 @@ struct OcclusionOptions {
   double band_sigmas = 3.0;     ///< k: band width in multiples of the noise sigma
   double min_band_m = 0.005;    ///< floor of the band
   bool refine = true;           ///< colour-guided refinement of alpha
-  int guide_radius = 2;
-  double guide_sigma_color = 10.0;  ///< in 8-bit colour units
+  int guide_radius = 3;
+  double guide_sigma_color = 20.0;  ///< in 8-bit colour units
   double guide_sigma_space = 1.5;   ///< in pixels
 };
 

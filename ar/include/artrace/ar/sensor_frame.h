@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -72,6 +73,31 @@ class FrameSource {
   /// What the reader had to decide for the user at open (defaults used, frames skipped or
   /// dropped, depth not registered): the tools print these.
   virtual std::vector<std::string> warnings() const { return {}; }
+};
+
+/// Frames held in memory as a recording (synthetic frames, tests).
+class FrameList : public FrameSource {
+ public:
+  explicit FrameList(std::vector<SensorFrame> frames, std::string what = "frames in memory")
+      : frames_(std::move(frames)), what_(std::move(what)) {}
+  std::optional<int64_t> frame_count() const override { return static_cast<int64_t>(frames_.size()); }
+  bool next(SensorFrame& frame) override {
+    if (cursor_ >= frames_.size()) return false;
+    frame = frames_[cursor_++];
+    return true;
+  }
+  void seek(int64_t index) override {
+    if (index < 0 || static_cast<size_t>(index) > frames_.size()) throw std::out_of_range(what_ + ": no frame " + std::to_string(index));
+    cursor_ = static_cast<size_t>(index);
+  }
+  std::string describe() const override { return what_; }
+  double depth_units_per_metre() const override { return 1000.0; }
+  std::string intrinsics_source() const override { return "given"; }
+
+ private:
+  std::vector<SensorFrame> frames_;
+  std::string what_;
+  size_t cursor_ = 0;
 };
 
 }  // namespace artrace::ar

@@ -5,18 +5,33 @@
 //       { "file": "models/box.gltf", "position": [0, 0.76, 0], "rotation_deg": [0, 30, 0],
 //         "scale": 1.0 | [sx, sy, sz], "animation": { "clip": 0 | "name", "speed": 1.0 },
 //         "material": { "kind": "diffuse" | "mirror" | "glass", "base_color": [r, g, b], "ior": 1.5,
-//                       "metallic": 0.0, "roughness": 0.5 } }
+//                       "metallic": 0.0, "roughness": 0.5 } },
+//       { "file": "models/man.glb", "scale": 0.3,
+//         "anchor": { "frame": 0, "pixel": [320, 400], "offset": 0.0, "rotation_deg": 30 } }
 //     ],
 //     "lights": [ { "position": [x, y, z], "color": [r, g, b] } ],
-//     "ambient": 0.3
+//     "ambient": 0.3,
+//     "room": "room.ply"
 //   }
+//
+// An anchor stands a model on the real surface seen at a pixel of a frame of the recording, instead
+// of a position: its origin on the plane fitted around that pixel (ar::plane_at_pixel: RANSAC over
+// the depths within 12 pixels, in world coordinates, so with or without a trajectory), its +Y along
+// the plane's normal (towards the camera that saw it), its +Z towards that camera along the plane,
+// then turned by "rotation_deg" about the normal and lifted by "offset" metres along it. Anchored
+// models take no "position" or "rotation_deg" of their own; resolve_anchors() places them once the
+// recording is open.
 //
 // Paths are relative to the JSON file. Every key is checked: an unknown key, a wrong type or a
 // number beyond +-1e6 is an error naming the file and the key ("scene.json:
 // models[1].rotation_deg: expected 3 numbers").
+// "room" names a fused model of the recording's room (a mesh `artrace fuse` writes), which the
+// compositor then takes as the real scene (ar::CompositeOptions::room).
 // Without lights, one light is estimated from the frame's brightness (see ar::Compositor).
 #pragma once
 
+#include "artrace/ar/plane_fit.h"
+#include "artrace/ar/sensor_frame.h"
 #include "artrace/io/gltf_model.h"
 
 #include <filesystem>
@@ -39,6 +54,17 @@ struct ArModelPlacement {
   std::optional<glm::vec3> base_color;  ///< replaces the base colour and its texture
   std::optional<float> ior;
   std::optional<float> metallic, roughness;
+  struct Anchor {
+    int frame = 0;
+    int u = 0, v = 0;
+    float offset_m = 0.0f;
+    float rotation_deg = 0.0f;
+  };
+  std::optional<Anchor> anchor;
+  /// Set by resolve_anchors: world from the anchor's frame (origin on the plane, +Y its normal).
+  std::optional<glm::mat4> anchored;
+  /// Set by resolve_anchors: the plane the model stands on (world), for contacts.
+  std::optional<ar::Plane> support;
 
   glm::mat4 world_from_model() const;
 };
@@ -54,10 +80,17 @@ struct ArSceneFile {
   std::vector<GltfModel> loaded;  ///< one per placement
   std::vector<ArLightSpec> lights;
   float ambient = 0.3f;
+  /// A fused model of the recording's room (artrace fuse), the real scene for the compositor.
+  std::optional<std::filesystem::path> room;
 };
 
 /// Loads the JSON and every model it names. Throws ParseError.
 ArSceneFile load_ar_scene(const std::filesystem::path& path);
+
+/// Places the anchored models on the surfaces of `recording` (see above); leaves it positioned at
+/// frame 0. Throws ParseError naming the scene file and the model when an anchor's frame does not
+/// exist or no plane is found at its pixel.
+void resolve_anchors(ArSceneFile& scene, ar::FrameSource& recording);
 
 }  // namespace artrace::io
 

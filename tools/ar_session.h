@@ -1,0 +1,125 @@
+// What export, replay and bench-ar share: an AR scene placed in a recording (anchors resolved on it,
+// the fused room loaded), the compositor's options, and a reader that decodes the next frame on a
+// thread of its own while the current one is composited.
+#pragma once
+
+#include "bench_util.h"
+#include "recording_options.h"
+
+#include "artrace/ar/compositor.h"
+#include "artrace/io/ar_scene.h"
+#include "artrace/io/fusion.h"
+
+#include <future>
+#include <memory>
+#include <string>
+
+namespace artrace::tools {
+
+struct ArArgs {
+  std::string scene, room;
+  RecordingArgs rec;
+  int threads = 0;
+};
+
+/// --scene (required), --room, the recording options, --threads.
+inline void add_ar_options(CLI::App* cmd, ArArgs& a) {
+  cmd->add_option("--scene", a.scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("--room", a.room, "a fused model of the recording's room (artrace fuse), the real scene instead of the per-frame depth mesh")
+      ->check(CLI::ExistingFile);
+  add_recording_options(cmd, a.rec);
+  add_threads_option(cmd, a.threads);
+}
+
+class ArSession {
+ public:
+  ArSession(const std::string& recording, const ArArgs& args, bool quiet = false) : scene_file_(io::load_ar_scene(args.scene)) {
+    if (!quiet) {
+      for (const io::GltfModel& m : scene_file_.loaded) {
+        for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+      }
+    }
+    source_ = open_recording(recording, args.rec, quiet);
+    io::resolve_anchors(scene_file_, *source_);
+    runtime_ = std::make_unique<io::ArRuntime>(scene_file_);
+    const std::string room = !args.room.empty() ? args.room : scene_file_.room ? scene_file_.room->string() : std::string();
+    if (!room.empty()) room_ = std::make_unique<ar::FusedRoom>(io::read_room_ply(room));
+    options_.lights = runtime_->lights();
+    options_.ambient = runtime_->ambient();
+    options_.alpha_tested = runtime_->alpha_tested();
+    options_.threads = args.threads;
+    options_.proxy = &proxy_;
+    options_.room = room_.get();
+    for (const io::ArModelPlacement& p : scene_file_.models) {
+      if (p.support) options_.support_planes.push_back(*p.support);
+    }
+  }
+
+  ar::FrameSource& source() { return *source_; }
+  io::ArRuntime& runtime() { return *runtime_; }
+  ar::CompositeOptions& options() { return options_; }
+  const ar::FusedRoom* room() const { return room_.get(); }
+
+  /// The models moved to the frame's time, and the frame composited. `update_ms` (optional): the
+  /// time the models took to move.
+  ar::ColorImage composite(const ar::SensorFrame& f, ar::CompositeStats* st, double* update_ms = nullptr) {
+    const double u = runtime_->update(f.color_time_s);
+    if (update_ms) *update_ms = u;
+    options_.object_bounds = runtime_->object_bounds();
+    const io::ArRuntime& rt = *runtime_;
+    return ar::composite(f, rt.scene(), [&rt](const ar::SurfaceQuery& q) { return rt.material(q); }, options_, st);
+  }
+
+ private:
+  io::ArSceneFile scene_file_;
+  std::unique_ptr<ar::FrameSource> source_;
+  std::unique_ptr<io::ArRuntime> runtime_;
+  std::unique_ptr<ar::FusedRoom> room_;
+  ar::DepthProxy proxy_;
+  ar::CompositeOptions options_;
+};
+
+/// Reads a recording one frame ahead on a thread of its own: next() hands over the frame read
+/// while the caller worked on the previous one, and starts reading the following one.
+class FrameReader {
+ public:
+  explicit FrameReader(ar::FrameSource& source) : source_(source) {}
+  ~FrameReader() { wait(); }
+
+  /// The next frame; false at the end. `read_ms`: how long its reading took (on the other thread).
+  bool next(ar::SensorFrame& frame, double* read_ms = nullptr) {
+    if (!pending_.valid()) start();
+    const bool ok = pending_.get();
+    if (read_ms) *read_ms = last_read_ms_;
+    if (!ok) return false;
+    std::swap(frame, ahead_);
+    start();
+    return true;
+  }
+  /// Positions the source (after any read in flight) so that next() returns frame `index`.
+  void seek(int64_t index) {
+    wait();
+    source_.seek(index);
+  }
+
+ private:
+  void start() {
+    pending_ = std::async(std::launch::async, [this] {
+      const auto t0 = std::chrono::steady_clock::now();
+      const bool ok = source_.next(ahead_);
+      last_read_ms_ = ms_since(t0);
+      return ok;
+    });
+  }
+  void wait() {
+    if (pending_.valid()) pending_.wait();
+    pending_ = std::future<bool>();
+  }
+
+  ar::FrameSource& source_;
+  ar::SensorFrame ahead_;
+  std::future<bool> pending_;
+  double last_read_ms_ = 0.0;
+};
+
+}  // namespace artrace::tools
