@@ -4,6 +4,7 @@
 #pragma once
 
 #include "bench_util.h"
+#include "commands.h"
 #include "recording_options.h"
 
 #include "artrace/ar/compositor.h"

@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
   artrace::tools::add_export_command(app);
   artrace::tools::add_replay_command(app);
   artrace::tools::add_bench_bart_command(app);
+  artrace::tools::add_bench_ar_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -20,6 +20,7 @@ void add_bench_occlusion_command(CLI::App& app);
 void add_export_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_bench_bart_command(CLI::App& app);
+void add_bench_ar_command(CLI::App& app);
 
 /// A number that is finite and within [lo, hi]. CLI::Range lets NaN through (NaN fails no
 /// comparison), and "nan" or "inf" parse as numbers.

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <mutex>
 
 namespace artrace::ar {
 namespace {
@@ -50,6 +51,32 @@ constexpr float kMirrorRoughness = 0.2f;
 struct Sample {
   glm::vec3 colour{0.0f};
   float coverage = 0.0f;
+};
+
+/// The parts of a tile's shading left for later, to be traced in packets: shadow rays (a light's
+/// contribution times the light passing) and secondary rays (a weight times what they see). Each
+/// names the pixel it adds to. Contributions add up linearly, so the result is what the shader
+/// tracing one ray at a time gives.
+struct Deferred {
+  struct Light {
+    core::Ray ray;
+    glm::vec3 add;
+    uint32_t pixel;
+  };
+  struct Secondary {
+    glm::vec3 org, dir, weight;
+    float path;
+    int depth;
+    uint32_t pixel;
+  };
+  std::vector<std::vector<Light>> lights;  ///< one list a light: rays towards one light are coherent
+  std::vector<Secondary> secondary[8];     ///< by direction octant
+  uint32_t pixel = 0;                       ///< the pixel being shaded
+  void clear(size_t n) {
+    lights.resize(n);
+    for (auto& l : lights) l.clear();
+    for (auto& v : secondary) v.clear();
+  }
 };
 
 struct Shader {
@@ -96,6 +123,40 @@ struct Shader {
     return 0.0f;
   }
 
+  /// light_passing for up to 16 rays at once, with the packet kernels: pass[i] for the lanes in
+  /// `mask`. The same answers as one ray at a time.
+  void light_passing(const core::RayPacket& rays, core::LaneMask mask, bool from_virtual, float* pass) const {
+    if (opt.alpha_tested) {
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        if ((mask >> i) & 1u) pass[i] = light_passing(rays.get(i), from_virtual);
+      }
+      return;
+    }
+    core::LaneMask open = mask;
+    if (from_virtual && opt.room && !opt.room->empty()) {
+      const core::LaneMask blocked = opt.room->scene().occluded(rays, mask);
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        if ((blocked >> i) & 1u) pass[i] = 0.0f;
+      }
+      open &= ~blocked;
+    }
+    if (!open) return;
+    if (!scene.has_transmittance()) {
+      const core::LaneMask blocked = scene.occluded(rays, open);
+      for (int i = 0; i < core::kPacketSize; ++i) {
+        if ((open >> i) & 1u) pass[i] = ((blocked >> i) & 1u) ? 0.0f : 1.0f;
+      }
+      return;
+    }
+    float trans[core::kPacketSize] = {};
+    const core::LaneMask unsure = scene.transmittance(rays, open, trans);
+    const core::LaneMask blocked = unsure ? scene.occluded(rays, unsure) : 0u;
+    for (int i = 0; i < core::kPacketSize; ++i) {
+      if (!((open >> i) & 1u)) continue;
+      pass[i] = ((unsure >> i) & 1u) ? (((blocked >> i) & 1u) ? 0.0f : 1.0f) : trans[i];
+    }
+  }
+
   /// The recorded colour seen along a ray that left the virtual objects where the depth mesh has
   /// nothing: the point 2 m (or 1 m, 0.5 m) on is looked up in the colour frame.
   glm::vec3 background(const glm::vec3& org, const glm::vec3& dir) const {
@@ -111,32 +172,37 @@ struct Shader {
     return glm::vec3(0.5f);
   }
 
-  /// What a secondary ray (reflection, refraction) sees: the virtual surfaces in front of the
-  /// depth mesh, blended front to back, then the recorded colour.
+  /// What a secondary ray sees, given its closest virtual hit `h` and real-scene hit: the virtual
+  /// surfaces in front of the real one, blended front to back, then the recorded colour.
+  glm::vec3 seen(const core::Ray& r, const core::Hit& h, bool real_hit, float t_real, const glm::vec3& real, int depth, float path) const {
+    if (h.valid() && (!real_hit || h.t <= t_real)) {
+      const Sample s = radiance(r, h, depth, path);
+      if (s.coverage >= 1.0f) return s.colour;
+      return s.colour + (1.0f - s.coverage) * (real_hit ? real : background(r.org, r.dir));
+    }
+    return real_hit ? real : background(r.org, r.dir);
+  }
+
+  /// What a secondary ray (reflection, refraction) sees, traced now (one ray).
   glm::vec3 trace(const glm::vec3& o, const glm::vec3& dir, int depth, float path) const {
     const core::Ray r{o, dir};
     float t_real = core::kInfinity;
     glm::vec3 real;
     const bool real_hit = proxy && proxy->intersect(r, t_real, real);
-    const core::Hit h = scene.intersect(r);
-    if (h.valid() && (!real_hit || h.t <= t_real)) {
-      const Sample s = radiance(r, h, depth, path);
-      if (s.coverage >= 1.0f) return s.colour;
-      return s.colour + (1.0f - s.coverage) * (real_hit ? real : background(o, dir));
-    }
-    return real_hit ? real : background(o, dir);
+    return seen(r, scene.intersect(r), real_hit, t_real, real, depth, path);
   }
 
   /// Colour and coverage along `r`, whose closest hit is `h`: cut-out points are passed, blended
-  /// surfaces composited front to back (Porter & Duff's "over").
-  Sample radiance(core::Ray r, core::Hit h, int depth, float path) const {
+  /// surfaces composited front to back (Porter & Duff's "over"). With `d`, shadow and secondary rays
+  /// of the first generation are left to it, weighted by `weight`.
+  Sample radiance(core::Ray r, core::Hit h, int depth, float path, Deferred* d = nullptr, const glm::vec3& weight = glm::vec3(1.0f)) const {
     Sample out;
     float through = 1.0f;
     for (int k = 0; k < kMaxLayers && h.valid(); ++k) {
       const VirtualMaterial m = look(r, h, path, false);
       if (!m.cutout) {
         const float a = std::clamp(m.alpha, 0.0f, 1.0f);
-        if (a > 0.0f) out.colour += through * a * shade(r, h, m, depth, path);
+        if (a > 0.0f) out.colour += through * a * shade(r, h, m, depth, path, d, weight * (through * a));
         through *= 1.0f - a;
         if (through <= 1e-3f) break;
       }
@@ -148,7 +214,11 @@ struct Shader {
     return out;
   }
 
-  glm::vec3 shade(const core::Ray& ray, const core::Hit& hit, const VirtualMaterial& m, int depth, float path) const {
+  /// The colour of a virtual surface at a hit. Without `d` everything is traced here, one ray at a
+  /// time; with it, the lights' contributions (with their shadow rays) and the secondary rays are
+  /// handed to `d` (times `weight`) and left out of the returned colour.
+  glm::vec3 shade(const core::Ray& ray, const core::Hit& hit, const VirtualMaterial& m, int depth, float path, Deferred* d = nullptr,
+                  const glm::vec3& weight = glm::vec3(1.0f)) const {
     const core::Triangle tri = scene.world_triangle(hit);
     glm::vec3 ng = glm::normalize(tri.geometric_normal());
     const bool front = glm::dot(ng, ray.dir) < 0.0f;
@@ -160,45 +230,64 @@ struct Shader {
     }
     const glm::vec3 p = tri.v0 * (1.0f - hit.u - hit.v) + tri.v1 * hit.u + tri.v2 * hit.v;
     const float magnitude = max_coord(tri);
-    const glm::vec3 d = glm::normalize(ray.dir);
+    const glm::vec3 dn = glm::normalize(ray.dir);
     const float here = path + hit.t * glm::length(ray.dir);
-    // light reaching p from each light, past the virtual objects
-    auto lit = [&](const VirtualLight& l, float& cosine) {
-      const glm::vec3 to = glm::normalize(l.position - p);
-      cosine = glm::dot(n, to);
-      if (cosine <= 0.0f || glm::dot(ng, to) <= 0.0f) return 0.0f;
-      if (!opt.shadows) return 1.0f;
+    glm::vec3 c(0.0f);
+    // a light's contribution `add` where its light passes: now, or left to `d`
+    auto lit = [&](size_t li, const glm::vec3& add) {
+      const VirtualLight& l = lights[li];
+      if (!opt.shadows) {
+        c += add;
+        return;
+      }
       const glm::vec3 o = core::offset_ray_origin(p, ng, magnitude);
-      return light_passing(core::Ray{o, l.position - o, 0.0f, 1.0f}, true);
+      const core::Ray r{o, l.position - o, 0.0f, 1.0f};
+      if (d) {
+        d->lights[li].push_back({r, add * weight, d->pixel});
+      } else {
+        c += add * light_passing(r, true);
+      }
+    };
+    // a secondary ray's colour times `w`: now, or left to `d`
+    auto secondary = [&](const glm::vec3& o, const glm::vec3& dir, const glm::vec3& w) {
+      if (d) {
+        const int oct = (dir.x < 0.0f ? 1 : 0) | (dir.y < 0.0f ? 2 : 0) | (dir.z < 0.0f ? 4 : 0);
+        d->secondary[oct].push_back({o, dir, w * weight, here, depth + 1, d->pixel});
+      } else {
+        c += w * trace(o, dir, depth + 1, here);
+      }
+    };
+    // the cosine with the light, 0 where it is behind the surface
+    auto facing = [&](const VirtualLight& l, glm::vec3& to) {
+      to = glm::normalize(l.position - p);
+      const float cosine = glm::dot(n, to);
+      return (cosine <= 0.0f || glm::dot(ng, to) <= 0.0f) ? 0.0f : cosine;
     };
     if ((m.kind == VirtualMaterial::kDiffuse && !m.pbr) || depth >= 2) {
-      glm::vec3 c = opt.ambient * m.occlusion * m.color;
-      for (const VirtualLight& l : lights) {
-        float cosine;
-        const float pass = lit(l, cosine);
-        if (pass > 0.0f) c += m.color * l.color * (cosine * pass);
+      c += opt.ambient * m.occlusion * m.color + m.emissive;
+      for (size_t li = 0; li < lights.size(); ++li) {
+        glm::vec3 to;
+        const float cosine = facing(lights[li], to);
+        if (cosine > 0.0f) lit(li, m.color * lights[li].color * cosine);
       }
-      return c + m.emissive;
+      return c;
     }
     if (m.kind == VirtualMaterial::kDiffuse) {
       // metallic-roughness
-      const glm::vec3 v = -d;
+      const glm::vec3 v = -dn;
       const float nv = std::max(glm::dot(n, v), 1e-4f);
       const glm::vec3 f0 = glm::mix(glm::vec3(0.04f), m.color, m.metallic);
       const glm::vec3 diffuse = m.color * (1.0f - m.metallic);
       const float a = std::max(m.roughness, 0.03f) * std::max(m.roughness, 0.03f), a2 = a * a, k = 0.5f * a;
       auto fresnel = [&](float cosine) { return f0 + (glm::vec3(1.0f) - f0) * std::pow(1.0f - std::clamp(cosine, 0.0f, 1.0f), 5.0f); };
       const float mirror = std::clamp(1.0f - m.roughness / kMirrorRoughness, 0.0f, 1.0f);
-      glm::vec3 c = opt.ambient * m.occlusion * (diffuse + (1.0f - mirror) * f0);
-      if (mirror > 0.0f) {
-        const glm::vec3 reflected = trace(core::offset_ray_origin(p, ng, magnitude), glm::reflect(d, n), depth + 1, here);
-        c += mirror * fresnel(nv) * reflected;
-      }
-      for (const VirtualLight& l : lights) {
-        float nl;
-        const float pass = lit(l, nl);
-        if (pass <= 0.0f) continue;
-        const glm::vec3 h = glm::normalize(glm::normalize(l.position - p) + v);
+      c += opt.ambient * m.occlusion * (diffuse + (1.0f - mirror) * f0) + m.emissive;
+      if (mirror > 0.0f) secondary(core::offset_ray_origin(p, ng, magnitude), glm::reflect(dn, n), mirror * fresnel(nv));
+      for (size_t li = 0; li < lights.size(); ++li) {
+        glm::vec3 to;
+        const float nl = facing(lights[li], to);
+        if (nl <= 0.0f) continue;
+        const glm::vec3 h = glm::normalize(to + v);
         const float nh = std::max(glm::dot(n, h), 0.0f), vh = std::max(glm::dot(v, h), 0.0f);
         const float den = nh * nh * (a2 - 1.0f) + 1.0f;
         const float D = a2 / (kPi * den * den);
@@ -206,19 +295,58 @@ struct Shader {
         const glm::vec3 F = fresnel(vh);
         // radiance for a light of the Lambert convention above (diffuse: base * light * cos)
         const glm::vec3 specular = kPi * D * G * F / (4.0f * nl * nv);
-        c += l.color * (pass * nl) * (diffuse * (glm::vec3(1.0f) - F) + specular);
+        lit(li, lights[li].color * nl * (diffuse * (glm::vec3(1.0f) - F) + specular));
       }
-      return c + m.emissive;
+      return c;
     }
-    const glm::vec3 reflected = trace(core::offset_ray_origin(p, ng, magnitude), glm::reflect(d, n), depth + 1, here);
-    if (m.kind == VirtualMaterial::kMirror) return m.color * reflected + m.emissive;
+    c += m.emissive;
+    const glm::vec3 reflect_from = core::offset_ray_origin(p, ng, magnitude);
+    if (m.kind == VirtualMaterial::kMirror) {
+      secondary(reflect_from, glm::reflect(dn, n), m.color);
+      return c;
+    }
     // glass: Fresnel between reflection and refraction; total internal reflection reflects all
     const float eta = front ? 1.0f / m.ior : m.ior;
-    const float fresnel = core::fresnel_dielectric(-glm::dot(d, n), eta);
+    const float fresnel = core::fresnel_dielectric(-glm::dot(dn, n), eta);
     glm::vec3 refr_dir;
-    if (!core::refract_direction(d, n, eta, refr_dir)) return reflected;
-    const glm::vec3 refracted = trace(core::offset_ray_origin(p, -ng, magnitude), refr_dir, depth + 1, here);
-    return fresnel * reflected + (1.0f - fresnel) * m.color * refracted + m.emissive;
+    if (!core::refract_direction(dn, n, eta, refr_dir)) {
+      secondary(reflect_from, glm::reflect(dn, n), glm::vec3(1.0f));
+      return c;
+    }
+    secondary(reflect_from, glm::reflect(dn, n), glm::vec3(fresnel));
+    secondary(core::offset_ray_origin(p, -ng, magnitude), refr_dir, (1.0f - fresnel) * m.color);
+    return c;
+  }
+
+  /// Traces what `d` holds, 16 rays a packet, and adds it to the pixels of `colour`.
+  void resolve(Deferred& d, std::vector<glm::vec3>& colour) const {
+    core::RayPacket rays{};
+    float pass[core::kPacketSize];
+    for (auto& list : d.lights) {
+      for (size_t at = 0; at < list.size(); at += core::kPacketSize) {
+        const int n = static_cast<int>(std::min<size_t>(core::kPacketSize, list.size() - at));
+        for (int i = 0; i < n; ++i) rays.set(i, list[at + i].ray);
+        light_passing(rays, (1u << n) - 1u, true, pass);
+        for (int i = 0; i < n; ++i) colour[list[at + i].pixel] += list[at + i].add * pass[i];
+      }
+    }
+    core::HitPacket hits{};
+    float t_real[core::kPacketSize];
+    glm::vec3 real[core::kPacketSize];
+    for (auto& list : d.secondary) {
+      for (size_t at = 0; at < list.size(); at += core::kPacketSize) {
+        const int n = static_cast<int>(std::min<size_t>(core::kPacketSize, list.size() - at));
+        const core::LaneMask mask = (1u << n) - 1u;
+        for (int i = 0; i < n; ++i) rays.set(i, core::Ray{list[at + i].org, list[at + i].dir});
+        for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
+        scene.intersect(rays, mask, hits);
+        const core::LaneMask real_hits = proxy ? proxy->intersect(rays, mask, t_real, real) : 0u;
+        for (int i = 0; i < n; ++i) {
+          const Deferred::Secondary& s = list[at + i];
+          colour[s.pixel] += s.weight * seen(rays.get(i), hits.get(i), (real_hits >> i) & 1u, t_real[i], real[i], s.depth, s.path);
+        }
+      }
+    }
   }
 };
 
@@ -360,38 +488,45 @@ void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const C
 /// nothing. The depth mesh tells, from kRealSkip off the point: the mesh is coarser than the depth
 /// map and as noisy as the sensor, so it is not asked about the point's own surface.
 constexpr float kRealSkip = 0.1f;
-const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const DepthImage& real_depth,
+const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const DepthImage& filled,
                                                   const std::vector<glm::vec3>& real_normals, const Rect& rect, const Shader& shader,
-                                                  const RealScene* proxy, CompositeStats& st) {
+                                                  const RealScene* proxy, CompositeStats& st, const std::vector<uint32_t>*& darkened_pixels) {
   const core::TwoLevelScene& scene = shader.scene;
   const std::vector<VirtualLight>& lights = shader.lights;
   const CompositeOptions& opt = shader.opt;
-  const int w = real_depth.width, h = real_depth.height;
-  // per-thread scratch kept across frames: no fresh megabytes (and page faults) every frame
-  // (taken by reference here: inside the tile lambda a thread_local name would be the worker's own)
-  thread_local std::vector<glm::vec3> factor_scratch, smooth_scratch;
+  const int w = filled.width, h = filled.height;
+  // per-thread factors kept across frames, all 1 but for the pixels of `pixels`, which the next
+  // call resets: no fresh megabytes (and page faults) every frame (taken by reference here: inside
+  // the tile lambda a thread_local name would be the worker's own)
+  thread_local std::vector<glm::vec3> factor_scratch;
+  thread_local std::vector<uint32_t> pixels_scratch;
   std::vector<glm::vec3>& factor = factor_scratch;
-  std::vector<glm::vec3>& smooth = smooth_scratch;
-  factor.assign(static_cast<size_t>(w) * h, glm::vec3(1.0f));
+  std::vector<uint32_t>& pixels = pixels_scratch;
+  if (factor.size() != static_cast<size_t>(w) * h) {
+    factor.assign(static_cast<size_t>(w) * h, glm::vec3(1.0f));
+  } else {
+    for (const uint32_t i : pixels) factor[i] = glm::vec3(1.0f);
+  }
+  pixels.clear();
+  darkened_pixels = &pixels;
   const std::vector<core::Aabb> boxes = opt.object_bounds.empty() ? std::vector<core::Aabb>{scene.bounds()} : opt.object_bounds;
   if (rect.empty()) return factor;
-  // small holes filled first, so a noisy depth map does not leave unshadowed specks (in the
-  // rectangle and a margin, where holes are judged)
-  const OcclusionOptions& oo = opt.occlusion_options;
-  const int margin = oo.fill_radius * oo.fill_passes + 2;
-  const Rect area{std::max(0, rect.x0 - margin), std::max(0, rect.y0 - margin), std::min(w, rect.x1 + margin),
-                  std::min(h, rect.y1 + margin)};
-  DepthImage cropped;
-  cropped.width = area.x1 - area.x0;
-  cropped.height = area.y1 - area.y0;
-  cropped.depth_m = crop(real_depth.depth_m, w, area);
-  const DepthImage filled = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
-  // every pixel read below (the rectangle and 2 around it, inside the image) is in the crop
-  auto depth = [&](int x, int y) { return filled.at(x - area.x0, y - area.y0); };
-  auto meets_virtual = [&](const glm::vec3& p, const glm::vec3& to) {
+  // the depth with its small holes filled (composite() did, over the rectangle and a margin), so a
+  // noisy depth map does not leave unshadowed specks
+  auto depth = [&](int x, int y) { return filled.at(x, y); };
+  // each box's shadow volume from each light has a screen rectangle of its own, much smaller than
+  // their union: a point is tested against a box only inside that box's rectangle
+  const core::Camera& cam = shader.cam;
+  std::vector<Rect> volume(boxes.size() * lights.size());
+  for (size_t bi = 0; bi < boxes.size(); ++bi)
+    for (size_t li = 0; li < lights.size(); ++li) volume[bi * lights.size() + li] = shadow_rect(cam, {boxes[bi]}, {lights[li]}, w, h);
+  // whether the segment from p to light li (p + to) meets a box; (x, y) is p's pixel
+  auto meets_virtual = [&](int x, int y, size_t li, const glm::vec3& p, const glm::vec3& to) {
     const glm::vec3 inv = 1.0f / to;
-    for (const core::Aabb& b : boxes) {
-      if (core::segment_meets_box(p, inv, 0.0f, 1.0f, b)) return true;
+    for (size_t bi = 0; bi < boxes.size(); ++bi) {
+      const Rect& r = volume[bi * lights.size() + li];
+      if (x < r.x0 || x >= r.x1 || y < r.y0 || y >= r.y1) continue;
+      if (core::segment_meets_box(p, inv, 0.0f, 1.0f, boxes[bi])) return true;
     }
     return false;
   };
@@ -399,25 +534,54 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   const PinholeIntrinsics& k = frame.color_intrinsics;
   const Eigen::Matrix3f rot = pose.rotation().cast<float>();
   const Eigen::Vector3f tr = pose.translation().cast<float>();
+  // (x - cx) / fx per column and (y - cy) / fy per row, worked out once (the same floats as before)
+  thread_local std::vector<float> ux, vy;
+  ux.resize(static_cast<size_t>(w));
+  vy.resize(static_cast<size_t>(h));
+  for (int x = 0; x < w; ++x) ux[static_cast<size_t>(x)] = static_cast<float>((x - k.cx) / k.fx);
+  for (int y = 0; y < h; ++y) vy[static_cast<size_t>(y)] = static_cast<float>((y - k.cy) / k.fy);
+  const std::vector<float>& ux_ = ux;  // the workers' thread_local names would be their own
+  const std::vector<float>& vy_ = vy;
   auto point = [&](int x, int y, glm::vec3& p) {
     const float z = depth(x, y);
     if (z <= 0.0f) return false;
-    const Eigen::Vector3f c(static_cast<float>((x - k.cx) / k.fx) * z, static_cast<float>((y - k.cy) / k.fy) * z, z);
+    const Eigen::Vector3f c(ux_[static_cast<size_t>(x)] * z, vy_[static_cast<size_t>(y)] * z, z);
     const Eigen::Vector3f q = rot * c + tr;
     p = glm::vec3(q.x(), q.y(), q.z());
     return true;
   };
   std::atomic<int> rays{0}, darkened{0};
+  std::mutex pixels_lock;
   core::for_each_tile(rect.x1 - rect.x0, rect.y1 - rect.y0, opt.threads, [&](const core::Tile& tile) {
     const core::Tile t{tile.x0 + rect.x0, tile.y0 + rect.y0, tile.x1 + rect.x0, tile.y1 + rect.y0};
+    // the tile's real points whose rays to a light meet the virtual objects' boxes, first all of
+    // them, then their shadow rays 16 a packet (rays towards one light share its end point)
+    struct Point {
+      uint32_t pixel;
+      glm::vec3 p, n;  ///< n zero where unknown
+    };
+    struct Shadow {
+      uint32_t point;
+      float cosine, dist;
+      core::Ray ray;
+      float pass;
+    };
+    thread_local std::vector<Point> points;
+    thread_local std::vector<std::vector<Shadow>> shadows;  // per light
+    points.clear();
+    shadows.resize(lights.size());
+    for (auto& v : shadows) v.clear();
     int local_rays = 0, local_dark = 0;
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) {
+        bool inside = false;  // in some shadow volume's rectangle
+        for (const Rect& r : volume) inside = inside || (x >= r.x0 && x < r.x1 && y >= r.y0 && y < r.y1);
+        if (!inside) continue;
         glm::vec3 p;
         if (!point(x, y, p)) continue;
         // most points' rays to the lights pass nowhere near the virtual objects: nothing changes
         bool near_virtual = false;
-        for (const VirtualLight& l : lights) near_virtual = near_virtual || meets_virtual(p, l.position - p);
+        for (size_t li = 0; li < lights.size() && !near_virtual; ++li) near_virtual = meets_virtual(x, y, li, p, lights[li].position - p);
         if (!near_virtual) continue;
         // normal of the depth map from neighbours 2 pixels away (less noise), facing the camera;
         // unknown at holes and image borders
@@ -433,37 +597,78 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
           const glm::vec3 eye(static_cast<float>(tr.x()), static_cast<float>(tr.y()), static_cast<float>(tr.z()));
           if (glm::dot(n, eye - p) < 0.0f) n = -n;
         }
-        glm::vec3 all(opt.ambient), lit(opt.ambient);
-        bool blocked_any = false;
-        for (const VirtualLight& l : lights) {
-          const glm::vec3 to = l.position - p;
+        const uint32_t k = static_cast<uint32_t>(points.size());
+        points.push_back({static_cast<uint32_t>(static_cast<size_t>(y) * w + x), p, n});
+        for (size_t li = 0; li < lights.size(); ++li) {
+          const glm::vec3 to = lights[li].position - p;
           const float dist = glm::length(to);
           if (!(dist > 0.0f)) continue;
           const float cosine = glm::dot(n, n) > 0.0f ? glm::dot(n, to / dist) : 1.0f;
           if (cosine <= 0.0f) continue;
-          all += l.color * cosine;
-          float pass = 1.0f;  // light reaching p past the virtual objects (glass lets some through)
-          if (meets_virtual(p, to)) {
-            ++local_rays;
-            const glm::vec3 side = glm::dot(n, n) > 0.0f ? n : to / dist;
-            const glm::vec3 o = core::offset_ray_origin(p, side);
-            pass = shader.light_passing(core::Ray{o, l.position - o, 0.0f, 1.0f});
+          Shadow sh{k, cosine, dist, core::Ray{}, 1.0f};
+          if (meets_virtual(x, y, li, p, to)) {
+            const glm::vec3 o = core::offset_ray_origin(p, glm::dot(n, n) > 0.0f ? n : to / dist);
+            sh.ray = core::Ray{o, lights[li].position - o, 0.0f, 1.0f};
+            sh.pass = -1.0f;  // to trace
           }
-          if (pass < 1.0f && proxy && !proxy->empty() && dist > kRealSkip) {
-            const glm::vec3 l_dir = to / dist;
-            if (proxy->scene().occluded(core::Ray{p + kRealSkip * l_dir, l_dir, 0.0f, dist - kRealSkip})) {
-              all -= l.color * cosine;  // the real scene already shadows this point from this light
-              continue;
-            }
-          }
-          blocked_any = blocked_any || pass < 1.0f;
-          lit += l.color * (cosine * pass);
-        }
-        if (blocked_any) {
-          factor[static_cast<size_t>(y) * w + x] = lit / all;
-          ++local_dark;
+          shadows[li].push_back(sh);
         }
       }
+    }
+    // the light passing past the virtual objects (glass lets some through), in packets
+    core::RayPacket packet{};
+    float pass[core::kPacketSize];
+    uint32_t lane_of[core::kPacketSize];
+    for (auto& list : shadows) {
+      int n = 0;
+      auto flush = [&] {
+        if (n == 0) return;
+        shader.light_passing(packet, (1u << n) - 1u, false, pass);
+        for (int i = 0; i < n; ++i) list[lane_of[i]].pass = pass[i];
+        local_rays += n;
+        n = 0;
+      };
+      for (uint32_t k = 0; k < list.size(); ++k) {
+        if (list[k].pass >= 0.0f) continue;
+        packet.set(n, list[k].ray);
+        lane_of[n++] = k;
+        if (n == core::kPacketSize) flush();
+      }
+      flush();
+    }
+    // the factors: (ambient + light reaching the point) / (ambient + light that would reach it)
+    thread_local std::vector<glm::vec3> all, lit;
+    thread_local std::vector<uint8_t> blocked;
+    all.assign(points.size(), glm::vec3(opt.ambient));
+    lit.assign(points.size(), glm::vec3(opt.ambient));
+    blocked.assign(points.size(), 0);
+    for (size_t li = 0; li < shadows.size(); ++li) {
+      const VirtualLight& l = lights[li];
+      for (const Shadow& sh : shadows[li]) {
+        const Point& pt = points[sh.point];
+        all[sh.point] += l.color * sh.cosine;
+        if (sh.pass < 1.0f && proxy && !proxy->empty() && sh.dist > kRealSkip) {
+          const glm::vec3 l_dir = (l.position - pt.p) / sh.dist;
+          if (proxy->scene().occluded(core::Ray{pt.p + kRealSkip * l_dir, l_dir, 0.0f, sh.dist - kRealSkip})) {
+            all[sh.point] -= l.color * sh.cosine;  // the real scene already shadows this point from this light
+            continue;
+          }
+        }
+        blocked[sh.point] |= sh.pass < 1.0f;
+        lit[sh.point] += l.color * (sh.cosine * sh.pass);
+      }
+    }
+    thread_local std::vector<uint32_t> mine;
+    mine.clear();
+    for (size_t k = 0; k < points.size(); ++k) {
+      if (!blocked[k]) continue;
+      factor[points[k].pixel] = lit[k] / all[k];
+      mine.push_back(points[k].pixel);
+      ++local_dark;
+    }
+    if (!mine.empty()) {
+      const std::lock_guard<std::mutex> hold(pixels_lock);  // the order of the list does not matter
+      pixels.insert(pixels.end(), mine.begin(), mine.end());
     }
     rays += local_rays;
     darkened += local_dark;
@@ -473,27 +678,30 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   if (darkened == 0) return factor;
   // the sensor's noise makes neighbouring normals (and so the factors) jitter: average each factor
   // with its four neighbours on the same surface (depth within 3%), which keeps the shadow's edge
-  smooth = factor;
-  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {
-    for (int x = std::max(1, rect.x0); x < std::min(w - 1, rect.x1); ++x) {
-      const size_t i = static_cast<size_t>(y) * w + x;
-      const float z = depth(x, y);
-      if (z <= 0.0f || factor[i] == glm::vec3(1.0f)) continue;
-      glm::vec3 sum = factor[i];
-      int n = 1;
-      const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
-      for (int k = 0; k < 4; ++k) {
-        const size_t j = static_cast<size_t>(ny[k]) * w + nx[k];
-        const float zj = depth(nx[k], ny[k]);
-        if (zj > 0.0f && std::fabs(zj - z) < 0.03f * z && factor[j] != glm::vec3(1.0f)) {
-          sum += factor[j];
-          ++n;
-        }
+  // (all averages from the unsmoothed factors, then written: the same for any order of `pixels`)
+  thread_local std::vector<glm::vec3> smooth;
+  smooth.resize(pixels.size());
+  for (size_t k = 0; k < pixels.size(); ++k) {
+    const size_t i = pixels[k];
+    const int x = static_cast<int>(i % static_cast<size_t>(w)), y = static_cast<int>(i / static_cast<size_t>(w));
+    smooth[k] = factor[i];
+    if (x < 1 || y < 1 || x >= w - 1 || y >= h - 1) continue;
+    const float z = depth(x, y);
+    glm::vec3 sum = factor[i];
+    int n = 1;
+    const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
+    for (int k2 = 0; k2 < 4; ++k2) {
+      const size_t j = static_cast<size_t>(ny[k2]) * w + nx[k2];
+      const float zj = depth(nx[k2], ny[k2]);
+      if (zj > 0.0f && std::fabs(zj - z) < 0.03f * z && factor[j] != glm::vec3(1.0f)) {
+        sum += factor[j];
+        ++n;
       }
-      smooth[i] = sum / static_cast<float>(n);
     }
+    smooth[k] = sum / static_cast<float>(n);
   }
-  return smooth;
+  for (size_t k = 0; k < pixels.size(); ++k) factor[pixels[k]] = smooth[k];
+  return factor;
 }
 
 }  // namespace
@@ -610,19 +818,42 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
     real_depth = &cleaned;
   }
   st.real_depth_ms = ms_since(td);
+  // small holes filled once, for the occlusion and the shadows on real surfaces: over their
+  // rectangles and a margin wide enough to judge the holes there as on the whole image
+  td = std::chrono::steady_clock::now();
+  thread_local DepthImage filled;
+  if (have_depth) {
+    const int mf = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
+    auto grow = [&](const Rect& r) {
+      return r.empty() ? r : Rect{std::max(0, r.x0 - mf), std::max(0, r.y0 - mf), std::min(w, r.x1 + mf), std::min(h, r.y1 + mf)};
+    };
+    Rect area = grow(opt.occlusion ? Rect{x0, y0, x1, y1} : Rect{0, 0, 0, 0});
+    const Rect sa = grow(shadow_area);
+    if (!sa.empty()) area = area.empty() ? sa : Rect{std::min(area.x0, sa.x0), std::min(area.y0, sa.y0), std::max(area.x1, sa.x1), std::max(area.y1, sa.y1)};
+    filled = *real_depth;
+    if (!area.empty()) {
+      DepthImage cropped;
+      cropped.width = area.x1 - area.x0;
+      cropped.height = area.y1 - area.y0;
+      cropped.depth_m = crop(real_depth->depth_m, w, area);
+      const DepthImage f = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
+      for (int y = area.y0; y < area.y1; ++y) {
+        std::copy_n(&f.depth_m[static_cast<size_t>(y - area.y0) * cropped.width], cropped.width, &filled.depth_m[static_cast<size_t>(y) * w + area.x0]);
+      }
+    }
+  }
+  st.occlusion_ms = ms_since(td);  // the occlusion's share; the rest is added below
   // the virtual objects' shadows on the real surfaces (they may fall outside the objects' rectangle)
   const std::vector<glm::vec3>* shadow_ptr = nullptr;
   if (real_shadows) {
     const auto ts = std::chrono::steady_clock::now();
-    shadow_ptr = &real_shadow_factors(frame, *real_depth, real_normals, shadow_area, shader, real, st);
-    st.real_shadow_ms = ms_since(ts);
+    const std::vector<uint32_t>* darkened = nullptr;
+    shadow_ptr = &real_shadow_factors(frame, filled, real_normals, shadow_area, shader, real, st, darkened);
     const std::vector<glm::vec3>& shadow = *shadow_ptr;
-    if (st.shadowed_real_pixels > 0) {
-      for (size_t i = 0; i < shadow.size(); ++i) {
-        if (shadow[i] == glm::vec3(1.0f)) continue;
-        for (int c = 0; c < 3; ++c) out.rgb[3 * i + c] = core::linear_to_srgb8(core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * shadow[i][c]);
-      }
+    for (const uint32_t i : *darkened) {
+      for (int c = 0; c < 3; ++c) out.rgb[3 * i + c] = core::linear_to_srgb8(core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * shadow[i][c]);
     }
+    st.real_shadow_ms = ms_since(ts);
   }
   if (x0 >= x1 || y0 >= y1) {
     if (stats) *stats = st;
@@ -631,12 +862,25 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
 
   auto t0 = std::chrono::steady_clock::now();
   const int rw = x1 - x0, rh = y1 - y0;
-  std::vector<float> zv(static_cast<size_t>(w) * h, std::numeric_limits<float>::infinity());
-  std::vector<glm::vec3> colour(static_cast<size_t>(w) * h);  // premultiplied by coverage
-  std::vector<float> coverage(static_cast<size_t>(w) * h, 0.0f);
+  // the buffers cover the traced rectangle and, around it, the margin the occlusion looks at
+  // (hole filling, colour-guided refinement): the region's own indices, kept across frames
+  const int m = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
+  const Rect around{std::max(0, x0 - m), std::max(0, y0 - m), std::min(w, x1 + m), std::min(h, y1 + m)};
+  const int aw = around.x1 - around.x0, ah = around.y1 - around.y0;
+  auto local = [&](int x, int y) { return static_cast<size_t>(y - around.y0) * aw + (x - around.x0); };
+  thread_local std::vector<float> zv, coverage, alpha;
+  thread_local std::vector<glm::vec3> colour;  // premultiplied by coverage
+  zv.assign(static_cast<size_t>(aw) * ah, std::numeric_limits<float>::infinity());
+  colour.assign(zv.size(), glm::vec3(0.0f));
+  coverage.assign(zv.size(), 0.0f);
+  std::vector<float>& zv_ = zv;  // the workers' thread_local names would be their own
+  std::vector<float>& coverage_ = coverage;
+  std::vector<glm::vec3>& colour_ = colour;
   core::for_each_tile(rw, rh, opt.threads, [&](const core::Tile& t) {
     core::RayPacket rays;
     core::HitPacket hits;
+    thread_local Deferred deferred;  // this tile's shadow and secondary rays, traced in packets at its end
+    deferred.clear(lights.size());
     for (int y = t.y0; y < t.y1; y += core::kPacketRows) {
       for (int x = t.x0; x < t.x1; x += 4) {
         core::LaneMask mask = 0;
@@ -648,10 +892,11 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
         scene.intersect(rays, mask, hits);
         for (int i = 0; i < core::kPacketSize; ++i) {
           if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
-          const size_t idx = static_cast<size_t>(y0 + y + i / 4) * w + (x0 + x + i % 4);
+          const size_t idx = local(x0 + x + i % 4, y0 + y + i / 4);
           const core::Ray r = rays.get(i);
           core::Hit hit = hits.get(i);
-          const Sample smp = shader.radiance(r, hit, 0, 0.0f);
+          deferred.pixel = static_cast<uint32_t>(idx);
+          const Sample smp = shader.radiance(r, hit, 0, 0.0f, &deferred);
           if (smp.coverage <= 0.0f) continue;  // cut out all along
           if (opt.alpha_tested) {
             // the occlusion test takes the first surface that is not cut out
@@ -662,57 +907,49 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
             }
             if (!hit.valid()) continue;
           }
-          zv[idx] = hit.t;  // camera-space z = 1: t is the depth
-          colour[idx] = smp.colour;
-          coverage[idx] = smp.coverage;
+          zv_[idx] = hit.t;  // camera-space z = 1: t is the depth
+          colour_[idx] = smp.colour;  // the deferred rays add theirs at the end of the tile
+          coverage_[idx] = smp.coverage;
         }
       }
     }
+    shader.resolve(deferred, colour_);
   });
   st.traced_pixels = rw * rh;
   st.trace_ms = ms_since(t0);
 
   t0 = std::chrono::steady_clock::now();
-  std::vector<float> alpha;
-  if (opt.occlusion && frame.depth.width == w && frame.depth.height == h) {
-    // only around the traced rectangle: a margin wide enough for the hole filling and the
-    // colour-guided refinement to see what they would see on the whole image
-    const OcclusionOptions& oo = opt.occlusion_options;
-    const int m = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
-    const int cx0 = std::max(0, x0 - m), cy0 = std::max(0, y0 - m), cx1 = std::min(w, x1 + m), cy1 = std::min(h, y1 + m);
-    const Rect around{cx0, cy0, cx1, cy1};
-    const int cw = cx1 - cx0;
+  if (opt.occlusion && have_depth) {
     DepthImage cd;
     ColorImage cc;
-    cd.width = cc.width = cw;
-    cd.height = cc.height = cy1 - cy0;
-    cd.depth_m = crop(real_depth->depth_m, w, around);
+    cd.width = cc.width = aw;
+    cd.height = cc.height = ah;
+    cd.depth_m = crop(filled.depth_m, w, around);
     cc.rgb = crop(frame.color.rgb, w, around, 3);
-    const std::vector<float> cz = crop(zv, w, around);
-    const std::vector<float> ca = occlusion_alpha(cd, cc, cz, oo);
-    alpha.assign(zv.size(), 0.0f);
-    for (int y = cy0; y < cy1; ++y) {
-      std::copy_n(&ca[static_cast<size_t>(y - cy0) * cw], cw, &alpha[static_cast<size_t>(y) * w + cx0]);
-    }
+    alpha = occlusion_alpha_filled(cd, cc, zv, oo);
   } else {
     alpha.resize(zv.size());
     for (size_t i = 0; i < zv.size(); ++i) alpha[i] = std::isfinite(zv[i]) ? 1.0f : 0.0f;
   }
-  st.occlusion_ms = ms_since(t0);
+  st.occlusion_ms += ms_since(t0);
   if (opt.keep_visibility) {
-    st.visibility = alpha;
-    st.virtual_depth = zv;
+    st.visibility.assign(static_cast<size_t>(w) * h, 0.0f);
+    st.virtual_depth.assign(static_cast<size_t>(w) * h, std::numeric_limits<float>::infinity());
+    for (int y = around.y0; y < around.y1; ++y) {
+      std::copy_n(&alpha[local(around.x0, y)], aw, &st.visibility[static_cast<size_t>(y) * w + around.x0]);
+      std::copy_n(&zv[local(around.x0, y)], aw, &st.virtual_depth[static_cast<size_t>(y) * w + around.x0]);
+    }
   }
 
   t0 = std::chrono::steady_clock::now();
   for (int y = y0; y < y1; ++y) {
     for (int x = x0; x < x1; ++x) {
-      const size_t i = static_cast<size_t>(y) * w + x;
-      if (alpha[i] <= 0.0f) continue;
+      const size_t i = static_cast<size_t>(y) * w + x, l = local(x, y);
+      if (alpha[l] <= 0.0f) continue;
       for (int c = 0; c < 3; ++c) {
         const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow_ptr ? (*shadow_ptr)[i][c] : 1.0f);
         // the virtual colour over the real one by its coverage, then by the occlusion's alpha
-        out.rgb[3 * i + c] = core::linear_to_srgb8(real + alpha[i] * (colour[i][c] - coverage[i] * real));
+        out.rgb[3 * i + c] = core::linear_to_srgb8(real + alpha[l] * (colour[l][c] - coverage[l] * real));
       }
     }
   }

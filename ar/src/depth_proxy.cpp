@@ -96,8 +96,26 @@ bool DepthProxy::intersect(const core::Ray& ray, float& t, glm::vec3& colour) co
   const core::Hit h = scene_.intersect(ray);
   if (!h.valid()) return false;
   t = h.t;
+  return colour_at(ray.org + h.t * ray.dir, colour);
+}
+
+core::LaneMask DepthProxy::intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const {
+  if (empty() || !frame_) return 0u;
+  core::HitPacket hits;
+  for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
+  scene_.intersect(rays, mask, hits);
+  core::LaneMask out = 0;
+  for (int i = 0; i < core::kPacketSize; ++i) {
+    if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
+    t[i] = hits.t[i];
+    const core::Ray r = rays.get(i);
+    if (colour_at(r.org + hits.t[i] * r.dir, colour[i])) out |= 1u << i;
+  }
+  return out;
+}
+
+bool DepthProxy::colour_at(const glm::vec3& p, glm::vec3& colour) const {
   // the recorded colour where the hit point projects into the colour frame
-  const glm::vec3 p = ray.org + h.t * ray.dir;
   const Eigen::Vector3d c = camera_from_world_ * Eigen::Vector3d(p.x, p.y, p.z);
   const ColorImage& img = frame_->color;
   if (c.z() <= 0.0) return false;

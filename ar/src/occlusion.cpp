@@ -69,8 +69,12 @@ DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int
 
 std::vector<float> occlusion_alpha(const DepthImage& sensor, const ColorImage& color, const std::vector<float>& zv,
                                    const OcclusionOptions& opt) {
-  const int w = sensor.width, h = sensor.height;
-  const DepthImage filled = fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes, opt.max_hole_px);
+  return occlusion_alpha_filled(fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes, opt.max_hole_px), color, zv, opt);
+}
+
+std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorImage& color, const std::vector<float>& zv,
+                                          const OcclusionOptions& opt) {
+  const int w = filled.width, h = filled.height;
   std::vector<float> alpha(static_cast<size_t>(w) * h, 0.0f);
   for (size_t i = 0; i < alpha.size(); ++i) {
     if (!std::isfinite(zv[i])) continue;

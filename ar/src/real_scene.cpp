@@ -28,13 +28,39 @@ FusedRoom::FusedRoom(RoomMesh mesh) : mesh_(std::move(mesh)) {
   scene_.commit();
 }
 
+core::LaneMask RealScene::intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const {
+  core::LaneMask hit = 0;
+  for (int i = 0; i < core::kPacketSize; ++i) {
+    if (((mask >> i) & 1u) && intersect(rays.get(i), t[i], colour[i])) hit |= 1u << i;
+  }
+  return hit;
+}
+
+glm::vec3 FusedRoom::colour_at(const core::Hit& h) const {
+  const glm::uvec3& i = mesh_.triangles[h.prim];
+  return (1.0f - h.u - h.v) * mesh_.colours[i.x] + h.u * mesh_.colours[i.y] + h.v * mesh_.colours[i.z];
+}
+
 bool FusedRoom::intersect(const core::Ray& ray, float& t, glm::vec3& colour) const {
   const core::Hit h = scene_.intersect(ray);
   if (!h.valid()) return false;
   t = h.t;
-  const glm::uvec3& i = mesh_.triangles[h.prim];
-  colour = (1.0f - h.u - h.v) * mesh_.colours[i.x] + h.u * mesh_.colours[i.y] + h.v * mesh_.colours[i.z];
+  colour = colour_at(h);
   return true;
+}
+
+core::LaneMask FusedRoom::intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const {
+  core::HitPacket hits;
+  for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
+  scene_.intersect(rays, mask, hits);
+  core::LaneMask out = 0;
+  for (int i = 0; i < core::kPacketSize; ++i) {
+    if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
+    t[i] = hits.t[i];
+    colour[i] = colour_at(hits.get(i));
+    out |= 1u << i;
+  }
+  return out;
 }
 
 glm::vec3 FusedRoom::normal(const core::Hit& hit, const glm::vec3& dir) const {

@@ -103,7 +103,6 @@ TEST(Occlusion, HolesInTheDepthMap) {
   ASSERT_LT(g, 4);
   for (int y = 8; y < 40; ++y) {
     for (int x = 8; x < 56; ++x) {
-      const bool inside_large = x >= 30 && x < 54 && y >= 10 && y < 30;
       const bool near_large = x >= 30 - g && x < 54 + g && y >= 10 - g && y < 30 + g;
       // hole filling reaches fill_radius x fill_passes = 8 pixels into a hole it may fill; this
       // one is too large to fill at all, so everything but the refinement's blend at its rim

@@ -32,8 +32,12 @@ class DepthProxy : public RealScene {
   /// Closest hit of a world-space ray with the depth mesh; the recorded colour there (linear RGB)
   /// when it hits.
   bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const override;
+  core::LaneMask intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const override;
 
  private:
+  /// The recorded colour where world point p projects (false behind the camera).
+  bool colour_at(const glm::vec3& p, glm::vec3& colour) const;
+
   int step_;
   float max_jump_;
   const SensorFrame* frame_ = nullptr;  ///< the frame of the last update (colour look-ups)

@@ -44,6 +44,11 @@ DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int
 std::vector<float> occlusion_alpha(const DepthImage& sensor_depth, const ColorImage& color,
                                    const std::vector<float>& virtual_depth_m, const OcclusionOptions& options = {});
 
+/// occlusion_alpha for a depth map whose holes fill_depth_holes has already filled (the compositor
+/// fills once for the occlusion and the shadows on real surfaces): the soft test and the refinement.
+std::vector<float> occlusion_alpha_filled(const DepthImage& filled_depth, const ColorImage& color, const std::vector<float>& virtual_depth_m,
+                                          const OcclusionOptions& options = {});
+
 /// The hard ground-truth mask from exact depth: 1 where the virtual surface is in front.
 std::vector<uint8_t> exact_visibility(const DepthImage& exact_depth, const std::vector<float>& virtual_depth_m);
 

@@ -25,6 +25,9 @@ class RealScene {
   virtual bool empty() const = 0;
   /// Closest hit of a world-space ray; the recorded colour there (linear RGB) when it hits.
   virtual bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const = 0;
+  /// The same for the lanes of `mask` of a packet, traced together; returns the lanes that hit
+  /// (their t and colour set). The same answers as one ray at a time.
+  virtual core::LaneMask intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const;
 };
 
 /// A fused triangle mesh of the real scene (world coordinates), vertex colours in linear RGB.
@@ -43,11 +46,14 @@ class FusedRoom : public RealScene {
   const core::TwoLevelScene& scene() const override { return scene_; }
   bool empty() const override { return mesh_.triangles.empty(); }
   bool intersect(const core::Ray& ray, float& t, glm::vec3& colour) const override;
+  core::LaneMask intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const override;
   /// The room's unit normal at a hit (interpolated vertex normals, facing `dir`'s origin side).
   glm::vec3 normal(const core::Hit& hit, const glm::vec3& dir) const;
   const RoomMesh& mesh() const { return mesh_; }
 
  private:
+  glm::vec3 colour_at(const core::Hit& h) const;
+
   RoomMesh mesh_;
   std::vector<glm::vec3> normals_;
   core::TwoLevelScene scene_{core::TwoLevelScene::Config::kKdTreeBvh};
