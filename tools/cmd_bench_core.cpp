@@ -102,20 +102,51 @@ double median_ms(int runs, const Fn& fn) {
   return median(ms);
 }
 
+/// Median of `runs` timings of `fn`, each after an untimed `prepare`, after one warm-up.
+template <class Prepare, class Fn>
+double median_ms(int runs, const Prepare& prepare, const Fn& fn) {
+  prepare();
+  fn();
+  std::vector<double> ms;
+  for (int r = 0; r < runs; ++r) {
+    prepare();
+    const auto t0 = Clock::now();
+    fn();
+    ms.push_back(ms_since(t0));
+  }
+  return median(ms);
+}
+
 /// Median over `runs` pairs of (time of `theirs` / time of `ours`), the two taken in turns after
-/// one warm-up each: ours' speed relative to theirs, measured side by side.
-template <class Ours, class Theirs>
-double paired_ratio(int runs, const Ours& ours, const Theirs& theirs) {
+/// one warm-up each, which of them goes first alternating from pair to pair: ours' speed relative
+/// to theirs, measured side by side. `prepare_theirs` runs untimed before each of theirs.
+template <class Ours, class Prepare, class Theirs>
+double paired_ratio(int runs, const Ours& ours, const Prepare& prepare_theirs, const Theirs& theirs) {
   ours();
+  prepare_theirs();
   theirs();
   std::vector<double> ratio;
   for (int r = 0; r < runs; ++r) {
-    auto t0 = Clock::now();
-    ours();
-    const double a = ms_since(t0);
-    t0 = Clock::now();
-    theirs();
-    ratio.push_back(ms_since(t0) / std::max(1e-9, a));
+    double a = 0.0, b = 0.0;
+    auto time_ours = [&] {
+      const auto t0 = Clock::now();
+      ours();
+      a = ms_since(t0);
+    };
+    auto time_theirs = [&] {
+      prepare_theirs();
+      const auto t0 = Clock::now();
+      theirs();
+      b = ms_since(t0);
+    };
+    if (r % 2 == 0) {
+      time_ours();
+      time_theirs();
+    } else {
+      time_theirs();
+      time_ours();
+    }
+    ratio.push_back(b / std::max(1e-9, a));
   }
   return median(ratio);
 }
@@ -295,31 +326,65 @@ void run(const Options& opt) {
 #if defined(ARTRACE_HAVE_EMBREE)
     EmbreeReference ref(tris, threads);
     nlohmann::json e;
+    e["setup"] = "RTC_BUILD_QUALITY_HIGH; camera packets RTC_INTERSECT_CONTEXT_FLAG_COHERENT, single and bounce rays the "
+                 "default incoherent context, shadow packets both (the faster counts); rays converted before and hits after the "
+                 "timed passes";
     e["build_ms"] = median_ms(opt.runs, [&] { ref.build(); });
+    // a timed pass over a batch: the tiles' calls, in parallel as ours are traced
+    auto embree_pass = [&](EmbreeBatch& batch, size_t w_per_tile, size_t w_packets, bool occlusion, bool coherent) {
+      return [&ref, &batch, &arena, tiles, w_per_tile, w_packets, occlusion, coherent] {
+        parallel_tiles(arena, tiles, [&](size_t t) {
+          const size_t first = batch.first_call(std::min(w_packets, t * w_per_tile));
+          const size_t last = batch.first_call(std::min(w_packets, (t + 1) * w_per_tile));
+          if (occlusion) ref.occluded(batch, first, last, coherent);
+          else ref.intersect(batch, first, last, coherent);
+        });
+      };
+    };
+    // camera rays: rtcIntersect1, and packets of 4, 8 and 16 (coherent); their best width counts
+    EmbreeBatch single_batch(primary.packets, primary.masks, 1);
+    const auto embree_single_pass = embree_pass(single_batch, per_tile, primary.packets.size(), false, false);
+    e["rays"]["primary_single"] = mrays(primary.rays, median_ms(opt.runs, [&] { single_batch.restore(); }, embree_single_pass));
+    std::vector<uint32_t> embree_prim;
+    EmbreeReference::hits(single_batch, embree_prim);
     size_t agree = 0;
-    for (size_t p = 0; p < primary.packets.size(); ++p) {
-      uint32_t prim[kPacketSize];
-      ref.intersect_packet(primary.packets[p], primary.masks[p], prim, opt.lanes);
-      for (int i = 0; i < kPacketSize; ++i) {
-        if ((primary.masks[p] >> i) & 1u) agree += prim[i] == hits[p].prim[i];
+    for (size_t p = 0; p < primary.packets.size(); ++p)
+      for (int i = 0; i < kPacketSize; ++i)
+        if ((primary.masks[p] >> i) & 1u) agree += embree_prim[p * kPacketSize + i] == hits[p].prim[i];
+    e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
+    int best_width = 0;
+    double best_packet = 0.0;
+    std::unique_ptr<EmbreeBatch> best_batch;
+    for (const int width : {4, 8, 16}) {
+      auto batch = std::make_unique<EmbreeBatch>(primary.packets, primary.masks, width);
+      const double r = mrays(primary.rays, median_ms(opt.runs, [&] { batch->restore(); },
+                                                    embree_pass(*batch, per_tile, primary.packets.size(), false, true)));
+      e["rays"]["primary_packet_" + std::to_string(width)] = r;
+      if (r > best_packet) {
+        best_packet = r;
+        best_width = width;
+        best_batch = std::move(batch);
       }
     }
-    e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
-    std::vector<uint32_t> sink(primary.packets.size() * kPacketSize);
-    auto embree_single = [&](const Workload& w) {
-      return pass(w, per_tile,
-                  [&, &w = w](size_t p) { ref.intersect1(w.packets[p], w.masks[p], &sink[p * kPacketSize]); });
-    };
-    e["rays"]["primary_single"] = mrays(primary.rays, median_ms(opt.runs, embree_single(primary)));
-    const auto embree_packet_pass = pass(primary, per_tile, [&](size_t p) {
-      ref.intersect_packet(primary.packets[p], primary.masks[p], &sink[p * kPacketSize], opt.lanes);
-    });
-    std::vector<LaneMask> embree_blocked(shadow.packets.size());
-    const auto embree_shadow_pass = pass(shadow, per_tile_shadow, [&](size_t p) {
-      embree_blocked[p] = ref.occluded_packet(shadow.packets[p], shadow.masks[p], opt.lanes);
-    });
-    e["rays"]["primary_packet"] = mrays(primary.rays, median_ms(opt.runs, embree_packet_pass));
-    e["rays"]["shadow"] = mrays(shadow.rays, median_ms(opt.runs, embree_shadow_pass));
+    e["rays"]["primary_packet"] = best_packet;
+    e["primary_packet_best_width"] = best_width;
+    const auto embree_packet_pass = embree_pass(*best_batch, per_tile, primary.packets.size(), false, true);
+    // shadow packets: the width of our packets, both context flags
+    EmbreeBatch shadow_batch(shadow.packets, shadow.masks, opt.lanes);
+    double shadow_rate[2];
+    for (const bool coherent : {false, true}) {
+      shadow_rate[coherent] = mrays(shadow.rays, median_ms(opt.runs, [&] { shadow_batch.restore(); },
+                                                           embree_pass(shadow_batch, per_tile_shadow, shadow.packets.size(), true, coherent)));
+    }
+    const bool shadow_coherent = shadow_rate[1] > shadow_rate[0];
+    e["rays"]["shadow_incoherent_flag"] = shadow_rate[0];
+    e["rays"]["shadow_coherent_flag"] = shadow_rate[1];
+    e["rays"]["shadow"] = std::max(shadow_rate[0], shadow_rate[1]);
+    const auto embree_shadow_pass = embree_pass(shadow_batch, per_tile_shadow, shadow.packets.size(), true, shadow_coherent);
+    shadow_batch.restore();
+    embree_shadow_pass();
+    std::vector<LaneMask> embree_blocked;
+    EmbreeReference::blocked(shadow_batch, embree_blocked);
     // Where the two disagree, brute force says who is right.
     size_t shadow_disagree = 0, ours_wrong = 0, embree_wrong = 0;
     for (size_t p = 0; p < shadow.packets.size(); ++p) {
@@ -335,13 +400,19 @@ void run(const Options& opt) {
     }
     e["shadow_packets_disagreeing"] = shadow_disagree;
     e["shadow_disagreeing_lanes_wrong"] = {{"artrace", ours_wrong}, {"embree", embree_wrong}};
-    // Speed ratios (ours / Embree's) from runs taken in turns, ours then Embree's, the median of
-    // the per-pair ratios: the machine's drift over the benchmark cancels out.
-    e["paired_ratio"] = {{"runs", opt.runs},
-                         {"primary_packet", paired_ratio(opt.runs, packet_pass, embree_packet_pass)},
-                         {"shadow", paired_ratio(opt.runs, shadow_pass, embree_shadow_pass)},
-                         {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, embree_shadow_pass)}};
-    e["rays"]["incoherent"] = mrays(bounce.rays, median_ms(opt.runs, embree_single(bounce)));
+    // incoherent bounce rays: rtcIntersect1
+    EmbreeBatch bounce_batch(bounce.packets, bounce.masks, 1);
+    const auto embree_bounce_pass = embree_pass(bounce_batch, per_tile, bounce.packets.size(), false, false);
+    e["rays"]["incoherent"] = mrays(bounce.rays, median_ms(opt.runs, [&] { bounce_batch.restore(); }, embree_bounce_pass));
+    // Speed ratios (ours / Embree's best) from runs taken in turns, the median of the per-pair
+    // ratios: the machine's drift over the benchmark cancels out.
+    e["paired_ratio"] = {
+        {"runs", opt.runs},
+        {"primary_single", paired_ratio(opt.runs, single_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
+        {"primary_packet", paired_ratio(opt.runs, packet_pass, [&] { best_batch->restore(); }, embree_packet_pass)},
+        {"shadow", paired_ratio(opt.runs, shadow_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
+        {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
+        {"incoherent", paired_ratio(opt.runs, single_rays(bounce), [&] { bounce_batch.restore(); }, embree_bounce_pass)}};
     out["embree"] = e;
 #else
     throw std::runtime_error("this build has no Embree (install libembree-dev and reconfigure)");
@@ -364,11 +435,16 @@ void run(const Options& opt) {
   }
   if (out.contains("embree")) {
     const nlohmann::json& e = out["embree"];
-    std::printf("  embree build %.1f ms\n", e["build_ms"].get<double>());
-    std::printf("  speed ratio artrace / embree, runs in turns (median of %d pairs): primary_packet %.3f, shadow %.3f, "
-                "shadow_hinted %.3f\n",
-                opt.runs, e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
-                e["paired_ratio"]["shadow_hinted"].get<double>());
+    std::printf("  embree build %.1f ms (HIGH); its best camera packet width %d (4: %.2f, 8: %.2f, 16: %.2f Mrays/s, coherent); "
+                "shadow packets incoherent flag %.2f, coherent %.2f Mrays/s\n",
+                e["build_ms"].get<double>(), e["primary_packet_best_width"].get<int>(), e["rays"]["primary_packet_4"].get<double>(),
+                e["rays"]["primary_packet_8"].get<double>(), e["rays"]["primary_packet_16"].get<double>(),
+                e["rays"]["shadow_incoherent_flag"].get<double>(), e["rays"]["shadow_coherent_flag"].get<double>());
+    std::printf("  speed ratio artrace / embree's best, runs in turns (median of %d pairs, order alternating): primary_single %.3f, "
+                "primary_packet %.3f, shadow %.3f, shadow_hinted %.3f, incoherent %.3f\n",
+                opt.runs, e["paired_ratio"]["primary_single"].get<double>(), e["paired_ratio"]["primary_packet"].get<double>(),
+                e["paired_ratio"]["shadow"].get<double>(), e["paired_ratio"]["shadow_hinted"].get<double>(),
+                e["paired_ratio"]["incoherent"].get<double>());
     const nlohmann::json& wrong = e["shadow_disagreeing_lanes_wrong"];
     std::printf("  shadow packets answered differently by embree: %zu (the differing lanes, by brute force: %zu of "
                 "ours wrong, %zu of embree's)\n",

@@ -1,6 +1,8 @@
 #include "embree_reference.h"
 
 #if defined(ARTRACE_HAVE_EMBREE)
+#include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -8,79 +10,129 @@
 namespace artrace::tools {
 namespace {
 
-/// Embree's ray layouts and packet calls of width N.
 template <int N>
 struct Width;
 template <>
+struct Width<4> {
+  using RayHit = RTCRayHit4;
+  using Ray = RTCRay4;
+  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect4(v, s, c, rh); }
+  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded4(v, s, c, r); }
+};
+template <>
 struct Width<8> {
-  using Ray = RTCRay8;
   using RayHit = RTCRayHit8;
-  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) {
-    rtcIntersect8(valid, s, c, rh);
-  }
-  static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded8(valid, s, c, r); }
+  using Ray = RTCRay8;
+  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect8(v, s, c, rh); }
+  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded8(v, s, c, r); }
 };
 template <>
 struct Width<16> {
-  using Ray = RTCRay16;
   using RayHit = RTCRayHit16;
-  static void intersect(const int* valid, RTCScene s, RTCIntersectContext* c, RayHit* rh) {
-    rtcIntersect16(valid, s, c, rh);
-  }
-  static void occluded(const int* valid, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded16(valid, s, c, r); }
+  using Ray = RTCRay16;
+  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect16(v, s, c, rh); }
+  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded16(v, s, c, r); }
 };
 
-/// Copies lanes [0, N) of the packet into Embree's N-wide ray layout; `valid` marks the lanes of `mask`.
-template <int N, class R>
-void fill_ray(const core::RayPacket& rays, core::LaneMask mask, R& r, int* valid) {
-  static_assert(N <= core::kPacketSize, "an Embree packet is at most one of ours");
-  for (int i = 0; i < N; ++i) {
-    valid[i] = ((mask >> i) & 1u) ? -1 : 0;
-    r.org_x[i] = rays.org[0][i];
-    r.org_y[i] = rays.org[1][i];
-    r.org_z[i] = rays.org[2][i];
-    r.dir_x[i] = rays.dir[0][i];
-    r.dir_y[i] = rays.dir[1][i];
-    r.dir_z[i] = rays.dir[2][i];
-    r.tnear[i] = rays.tmin[i];
-    r.tfar[i] = rays.tmax[i];
-    r.time[i] = 0.0f;
-    r.mask[i] = 0xffffffffu;
-    r.id[i] = static_cast<unsigned>(i);
-    r.flags[i] = 0;
+/// 64-byte aligned storage of `n` records of `size` bytes.
+struct Aligned {
+  void* data = nullptr;
+  size_t bytes = 0;
+  void reset(size_t n) {
+    std::free(data);
+    bytes = n;
+    data = n ? std::aligned_alloc(64, (n + 63) / 64 * 64) : nullptr;
+    if (n && !data) throw std::bad_alloc();
+    if (n) std::memset(data, 0, n);
   }
-}
-
-template <int N>
-void intersect_n(RTCScene scene, const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  alignas(64) int valid[N];
-  alignas(64) typename Width<N>::RayHit rh;
-  fill_ray<N>(rays, mask, rh.ray, valid);
-  for (int i = 0; i < N; ++i) rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-  Width<N>::intersect(valid, scene, &ctx, &rh);
-  for (int i = 0; i < N; ++i) {
-    if ((mask >> i) & 1u) prim[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? core::kInvalidId : rh.hit.primID[i];
-  }
-}
-
-template <int N>
-core::LaneMask occluded_n(RTCScene scene, const core::RayPacket& rays, core::LaneMask mask) {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  alignas(64) int valid[N];
-  alignas(64) typename Width<N>::Ray r;
-  fill_ray<N>(rays, mask, r, valid);
-  Width<N>::occluded(valid, scene, &ctx, &r);
-  core::LaneMask blocked = 0;
-  for (int i = 0; i < N; ++i) {
-    if (((mask >> i) & 1u) && r.tfar[i] < 0.0f) blocked |= 1u << i;
-  }
-  return blocked;
-}
+  ~Aligned() { std::free(data); }
+};
 
 }  // namespace
+
+struct EmbreeBatch::Impl {
+  Aligned pristine, live;
+  std::vector<int> valid;  ///< width ints a call
+  /// For each call: our packet, and the lane of its first Embree lane (width 1: the lane itself).
+  std::vector<std::pair<uint32_t, int>> origin;
+  size_t record = 0;  ///< bytes a call
+  size_t packets = 0;
+};
+
+EmbreeBatch::EmbreeBatch(const std::vector<core::RayPacket>& packets, const std::vector<core::LaneMask>& masks, int width)
+    : impl_(std::make_unique<Impl>()), width_(width) {
+  Impl& b = *impl_;
+  b.packets = packets.size();
+  if (width == 1) {
+    for (size_t p = 0; p < packets.size(); ++p)
+      for (int i = 0; i < core::kPacketSize; ++i)
+        if ((masks[p] >> i) & 1u) b.origin.push_back({static_cast<uint32_t>(p), i});
+    b.record = sizeof(RTCRayHit);
+    calls_ = b.origin.size();
+    b.pristine.reset(calls_ * b.record);
+    auto* rh = static_cast<RTCRayHit*>(b.pristine.data);
+    for (size_t c = 0; c < calls_; ++c) {
+      const core::RayPacket& r = packets[b.origin[c].first];
+      const int i = b.origin[c].second;
+      RTCRayHit& h = rh[c];
+      h.ray.org_x = r.org[0][i];
+      h.ray.org_y = r.org[1][i];
+      h.ray.org_z = r.org[2][i];
+      h.ray.dir_x = r.dir[0][i];
+      h.ray.dir_y = r.dir[1][i];
+      h.ray.dir_z = r.dir[2][i];
+      h.ray.tnear = r.tmin[i];
+      h.ray.tfar = r.tmax[i];
+      h.ray.mask = 0xffffffffu;
+      h.ray.flags = 0;
+      h.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    }
+  } else {
+    if (width != 4 && width != 8 && width != 16) throw std::invalid_argument("Embree packets are 4, 8 or 16 wide");
+    // one call per width-lane block of each packet that has a lane in it
+    for (size_t p = 0; p < packets.size(); ++p)
+      for (int o = 0; o < core::kPacketSize; o += width)
+        if ((masks[p] >> o) & ((1u << width) - 1u)) b.origin.push_back({static_cast<uint32_t>(p), o});
+    b.record = width == 4 ? sizeof(RTCRayHit4) : width == 8 ? sizeof(RTCRayHit8) : sizeof(RTCRayHit16);
+    calls_ = b.origin.size();
+    b.pristine.reset(calls_ * b.record);
+    b.valid.assign(calls_ * static_cast<size_t>(width), 0);
+    auto fill = [&](auto* rh) {
+      for (size_t c = 0; c < calls_; ++c) {
+        const core::RayPacket& r = packets[b.origin[c].first];
+        const int o = b.origin[c].second;
+        for (int k = 0; k < width; ++k) {
+          const int i = o + k;
+          b.valid[c * width + k] = ((masks[b.origin[c].first] >> i) & 1u) ? -1 : 0;
+          rh[c].ray.org_x[k] = r.org[0][i];
+          rh[c].ray.org_y[k] = r.org[1][i];
+          rh[c].ray.org_z[k] = r.org[2][i];
+          rh[c].ray.dir_x[k] = r.dir[0][i];
+          rh[c].ray.dir_y[k] = r.dir[1][i];
+          rh[c].ray.dir_z[k] = r.dir[2][i];
+          rh[c].ray.tnear[k] = r.tmin[i];
+          rh[c].ray.tfar[k] = r.tmax[i];
+          rh[c].ray.mask[k] = 0xffffffffu;
+          rh[c].ray.flags[k] = 0;
+          rh[c].ray.id[k] = static_cast<unsigned>(k);
+          rh[c].hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+        }
+      }
+    };
+    if (width == 4) fill(static_cast<RTCRayHit4*>(b.pristine.data));
+    else if (width == 8) fill(static_cast<RTCRayHit8*>(b.pristine.data));
+    else fill(static_cast<RTCRayHit16*>(b.pristine.data));
+  }
+  b.live.reset(b.pristine.bytes);
+  restore();
+  first_call_.assign(packets.size() + 1, calls_);
+  for (size_t c = calls_; c-- > 0;) first_call_[b.origin[c].first] = c;
+  for (size_t p = packets.size(); p-- > 0;) first_call_[p] = std::min(first_call_[p], first_call_[p + 1]);
+}
+
+EmbreeBatch::~EmbreeBatch() = default;
+
+void EmbreeBatch::restore() { std::memcpy(impl_->live.data, impl_->pristine.data, impl_->pristine.bytes); }
 
 EmbreeReference::EmbreeReference(const std::vector<core::Triangle>& tris, int threads) : tris_(tris) {
   const std::string config = "threads=" + std::to_string(threads);
@@ -99,6 +151,7 @@ void EmbreeReference::build() {
   scene_ = rtcNewScene(device_);
   rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+  rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
   auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                         3 * sizeof(float), 3 * tris_.size()));
   auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
@@ -115,38 +168,97 @@ void EmbreeReference::build() {
   rtcCommitScene(scene_);
 }
 
-void EmbreeReference::intersect1(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const {
+namespace {
+
+template <int N>
+void intersect_calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t last, RTCIntersectContext* ctx) {
+  auto* rh = static_cast<typename Width<N>::RayHit*>(b.live.data);
+  for (size_t c = first; c < last; ++c) Width<N>::intersect(&b.valid[c * N], scene, ctx, &rh[c]);
+}
+
+template <int N>
+void occluded_calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t last, RTCIntersectContext* ctx) {
+  auto* rh = static_cast<typename Width<N>::RayHit*>(b.live.data);
+  for (size_t c = first; c < last; ++c) Width<N>::occluded(&b.valid[c * N], scene, ctx, &rh[c].ray);
+}
+
+}  // namespace
+
+void EmbreeReference::intersect(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
-  for (int i = 0; i < core::kPacketSize; ++i) {
-    if (!((mask >> i) & 1u)) continue;
-    RTCRayHit rh{};
-    rh.ray.org_x = rays.org[0][i];
-    rh.ray.org_y = rays.org[1][i];
-    rh.ray.org_z = rays.org[2][i];
-    rh.ray.dir_x = rays.dir[0][i];
-    rh.ray.dir_y = rays.dir[1][i];
-    rh.ray.dir_z = rays.dir[2][i];
-    rh.ray.tnear = rays.tmin[i];
-    rh.ray.tfar = rays.tmax[i];
-    rh.ray.mask = 0xffffffffu;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene_, &ctx, &rh);
-    prim[i] = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? core::kInvalidId : rh.hit.primID;
+  ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  EmbreeBatch::Impl& b = *batch.impl_;
+  switch (batch.width()) {
+    case 1: {
+      auto* rh = static_cast<RTCRayHit*>(b.live.data);
+      for (size_t c = first; c < last; ++c) rtcIntersect1(scene_, &ctx, &rh[c]);
+      break;
+    }
+    case 4: intersect_calls<4>(scene_, b, first, last, &ctx); break;
+    case 8: intersect_calls<8>(scene_, b, first, last, &ctx); break;
+    default: intersect_calls<16>(scene_, b, first, last, &ctx); break;
   }
 }
 
-void EmbreeReference::intersect_packet(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim,
-                                       int width) const {
-  if (width == 16) {
-    intersect_n<16>(scene_, rays, mask, prim);
-  } else {
-    intersect_n<8>(scene_, rays, mask & 0xffu, prim);
+void EmbreeReference::occluded(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  EmbreeBatch::Impl& b = *batch.impl_;
+  switch (batch.width()) {
+    case 1: {
+      auto* rh = static_cast<RTCRayHit*>(b.live.data);
+      for (size_t c = first; c < last; ++c) rtcOccluded1(scene_, &ctx, &rh[c].ray);
+      break;
+    }
+    case 4: occluded_calls<4>(scene_, b, first, last, &ctx); break;
+    case 8: occluded_calls<8>(scene_, b, first, last, &ctx); break;
+    default: occluded_calls<16>(scene_, b, first, last, &ctx); break;
   }
 }
 
-core::LaneMask EmbreeReference::occluded_packet(const core::RayPacket& rays, core::LaneMask mask, int width) const {
-  return width == 16 ? occluded_n<16>(scene_, rays, mask) : occluded_n<8>(scene_, rays, mask & 0xffu);
+void EmbreeReference::hits(const EmbreeBatch& batch, std::vector<uint32_t>& prim) {
+  const EmbreeBatch::Impl& b = *batch.impl_;
+  prim.assign(b.packets * core::kPacketSize, core::kInvalidId);
+  const int w = batch.width();
+  for (size_t c = 0; c < batch.calls(); ++c) {
+    const auto [p, o] = b.origin[c];
+    if (w == 1) {
+      const RTCRayHit& h = static_cast<const RTCRayHit*>(b.live.data)[c];
+      if (h.hit.geomID != RTC_INVALID_GEOMETRY_ID) prim[p * core::kPacketSize + o] = h.hit.primID;
+      continue;
+    }
+    auto read = [&](const auto* rh) {
+      for (int k = 0; k < w; ++k) {
+        if (b.valid[c * w + k] && rh[c].hit.geomID[k] != RTC_INVALID_GEOMETRY_ID) prim[p * core::kPacketSize + o + k] = rh[c].hit.primID[k];
+      }
+    };
+    if (w == 4) read(static_cast<const RTCRayHit4*>(b.live.data));
+    else if (w == 8) read(static_cast<const RTCRayHit8*>(b.live.data));
+    else read(static_cast<const RTCRayHit16*>(b.live.data));
+  }
+}
+
+void EmbreeReference::blocked(const EmbreeBatch& batch, std::vector<core::LaneMask>& out) {
+  const EmbreeBatch::Impl& b = *batch.impl_;
+  out.assign(b.packets, 0u);
+  const int w = batch.width();
+  for (size_t c = 0; c < batch.calls(); ++c) {
+    const auto [p, o] = b.origin[c];
+    if (w == 1) {
+      if (static_cast<const RTCRayHit*>(b.live.data)[c].ray.tfar < 0.0f) out[p] |= 1u << o;
+      continue;
+    }
+    auto read = [&](const auto* rh) {
+      for (int k = 0; k < w; ++k) {
+        if (b.valid[c * w + k] && rh[c].ray.tfar[k] < 0.0f) out[p] |= 1u << (o + k);
+      }
+    };
+    if (w == 4) read(static_cast<const RTCRayHit4*>(b.live.data));
+    else if (w == 8) read(static_cast<const RTCRayHit8*>(b.live.data));
+    else read(static_cast<const RTCRayHit16*>(b.live.data));
+  }
 }
 
 }  // namespace artrace::tools

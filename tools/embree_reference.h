@@ -1,4 +1,10 @@
 // Embree as a side-by-side reference in benchmarks only; the product's traversal is its own.
+//
+// Set up as Embree's documentation advises, at its best for each kind of ray: a HIGH-quality BVH
+// for static geometry; RTC_INTERSECT_CONTEXT_FLAG_COHERENT for coherent packets (camera rays), the
+// default (incoherent) context for single and bounce rays, and both for shadow packets, of which
+// the faster counts. Rays are converted to Embree's layouts before any timing, and its hits back
+// after: a timed pass holds Embree's calls and nothing else.
 #pragma once
 
 #if defined(ARTRACE_HAVE_EMBREE)
@@ -6,9 +12,33 @@
 
 #include <embree3/rtcore.h>
 
+#include <memory>
 #include <vector>
 
 namespace artrace::tools {
+
+/// Packets (or single rays) already in Embree's layout, with a pristine copy to restore before
+/// each timed pass (Embree writes its answers into them).
+class EmbreeBatch {
+ public:
+  /// `width` 1 (single rays: rtcIntersect1 / rtcOccluded1), 4, 8 or 16; lanes [0, width) of each
+  /// of our packets (1: every lane of `mask`, one call each).
+  EmbreeBatch(const std::vector<core::RayPacket>& packets, const std::vector<core::LaneMask>& masks, int width);
+  ~EmbreeBatch();
+  void restore();  ///< untimed: the rays as converted
+  size_t calls() const { return calls_; }
+  /// The calls of our packets [first, last), which come one after the other.
+  size_t first_call(size_t packet) const { return first_call_[packet]; }
+  int width() const { return width_; }
+
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+
+ private:
+  size_t calls_ = 0;
+  int width_ = 1;
+  std::vector<size_t> first_call_;  ///< per packet, and one past the last
+};
 
 class EmbreeReference {
  public:
@@ -19,11 +49,14 @@ class EmbreeReference {
 
   /// (Re)builds the scene with RTC_BUILD_QUALITY_HIGH.
   void build();
-  void intersect1(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim) const;
-  /// rtcIntersect8 / rtcIntersect16 (`width` 8 or 16) on lanes [0, width) of the packet.
-  void intersect_packet(const core::RayPacket& rays, core::LaneMask mask, uint32_t* prim, int width) const;
-  /// rtcOccluded8 / rtcOccluded16 likewise; returns the blocked lanes.
-  core::LaneMask occluded_packet(const core::RayPacket& rays, core::LaneMask mask, int width) const;
+  /// Closest hits of calls [first, last) of a batch; `coherent` chooses the context flag.
+  void intersect(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
+  /// Any hits likewise.
+  void occluded(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
+  /// After a pass: the primitive hit by each of our lanes (kInvalidId: none), packet by packet.
+  static void hits(const EmbreeBatch& batch, std::vector<uint32_t>& prim);
+  /// After an occlusion pass: the blocked lanes of each of our packets.
+  static void blocked(const EmbreeBatch& batch, std::vector<core::LaneMask>& blocked);
 
  private:
   const std::vector<core::Triangle>& tris_;
