@@ -119,6 +119,79 @@ inline std::vector<Ray> random_rays(std::mt19937& rng, size_t count) {
   return rays;
 }
 
+/// Axis-aligned boxes whose faces lie in the planes the SAH picks, rays aimed at their vertices
+/// and edges, zero-area triangles and piles of coincident triangles.
+inline std::vector<Triangle> adversarial_scene() {
+  std::vector<Triangle> tris;
+  auto quad = [&](glm::vec3 a, glm::vec3 b, glm::vec3 c, glm::vec3 d) {
+    tris.push_back({a, b, c});
+    tris.push_back({a, c, d});
+  };
+  for (int i = 0; i < 4; ++i) {
+    for (int j = 0; j < 4; ++j) {
+      const glm::vec3 lo(2.0f * i, 0.0f, 2.0f * j), hi = lo + glm::vec3(1.0f, 1.0f + i, 1.0f);
+      quad({lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z});
+      quad({lo.x, lo.y, hi.z}, {lo.x, hi.y, hi.z}, {hi.x, hi.y, hi.z}, {hi.x, lo.y, hi.z});
+      quad({lo.x, lo.y, lo.z}, {lo.x, hi.y, lo.z}, {lo.x, hi.y, hi.z}, {lo.x, lo.y, hi.z});
+      quad({hi.x, lo.y, lo.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {hi.x, hi.y, lo.z});
+      quad({lo.x, hi.y, lo.z}, {lo.x, hi.y, hi.z}, {hi.x, hi.y, hi.z}, {hi.x, hi.y, lo.z});
+      quad({lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, lo.y, hi.z}, {lo.x, lo.y, hi.z});
+    }
+  }
+  // a floor exactly in the plane y = 0 that the boxes' bottoms share
+  quad({-1, 0, -1}, {-1, 0, 9}, {9, 0, 9}, {9, 0, -1});
+  // walls in the plane x = 0 written as -0.0 and as +0.0 (one position to the build)
+  quad({-0.0f, 0, 0}, {-0.0f, 3, 0}, {-0.0f, 3, 3}, {-0.0f, 0, 3});
+  quad({0, 0, 4}, {0, 3, 4}, {0, 3, 7}, {-0.0f, 0, 7});
+  // zero-area triangles: a point and a line
+  tris.push_back({{3, 3, 3}, {3, 3, 3}, {3, 3, 3}});
+  tris.push_back({{0, 2, 0}, {4, 2, 4}, {8, 2, 8}});
+  // 50 coincident copies of one triangle, in all vertex orders
+  for (int k = 0; k < 50; ++k) {
+    const glm::vec3 a(1, 6, 1), b(6, 6, 2), c(2, 6, 6);
+    if (k % 3 == 0) tris.push_back({a, b, c});
+    else if (k % 3 == 1) tris.push_back({b, c, a});
+    else tris.push_back({c, a, b});
+  }
+  return tris;
+}
+
+/// Slivers 2.2 long with two vertices in a plane x = c and the third 1 to 3 ulps off it, beside
+/// boxes with faces in that plane every 6 cm up the sliver (so that the SAH splits in the plane and
+/// across the sliver), and rays at points of the slivers from both sides.
+inline void sliver_scene(std::vector<Triangle>& tris, std::vector<Ray>& rays) {
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  for (int k = 0; k < 24; ++k) {
+    const float c = 1.0f + 0.25f * static_cast<float>(k % 8);  // the plane x = c
+    const float z0 = 0.5f * static_cast<float>(k / 8);
+    // boxes with a face in the plane, on one side, every 6 cm up the sliver: the SAH puts split
+    // planes in x = c and across the sliver
+    const float side = k % 2 ? 1.0f : -1.0f;
+    for (int j = 0; j < 36; ++j) {
+      const float y = 0.06f * static_cast<float>(j), x1 = c + side * 0.1f;
+      const glm::vec3 a(c, y, z0 - 0.1f), b(x1, y, z0 - 0.1f), cc(x1, y + 0.03f, z0 - 0.1f), d(c, y + 0.03f, z0 - 0.1f);
+      tris.push_back({a, b, cc});
+      tris.push_back({a, cc, d});
+      tris.push_back({a, d, glm::vec3(c, y + 0.03f, z0 + 0.2f)});
+      tris.push_back({a, glm::vec3(c, y + 0.03f, z0 + 0.2f), glm::vec3(c, y, z0 + 0.2f)});
+    }
+    // the sliver, 2.2 long: two vertices in the plane, the third 1 to 3 ulps off it, to either side
+    const int ulps = 1 + k % 3;
+    float off = c;
+    for (int u = 0; u < ulps; ++u) off = std::nextafter(off, (k / 2) % 2 ? 10.0f : -10.0f);
+    const glm::vec3 A(c, 2.2f, z0), B(c, 2.2f, z0 + 0.13f), C(off, 0.0f, z0 + 0.13f);
+    tris.push_back({A, B, C});
+    for (int r = 0; r < 200; ++r) {  // rays at points of the sliver, from both sides
+      float s = uni(rng), t = uni(rng);
+      if (s + t > 1.0f) s = 1.0f - s, t = 1.0f - t;
+      const glm::vec3 p = A + s * (B - A) + t * (C - A);
+      const glm::vec3 o = p + glm::vec3(r % 2 ? 1.5f : -1.5f, 0.3f * (uni(rng) - 0.5f), 0.3f * (uni(rng) - 0.5f));
+      rays.push_back(Ray{o, p - o});
+    }
+  }
+}
+
 /// A closed, consistently wound sphere: `n` x 2n latitude/longitude grid, vertices shared exactly.
 inline std::vector<Triangle> closed_sphere(const glm::vec3& c, float r, int n) {
   std::vector<glm::vec3> v;

@@ -251,6 +251,21 @@ void clipped_bounds_split(const Triangle& tri, const Aabb& voxel_left, const Aab
       cur_x = nxt_x;
     }
   }
+  // The points made by clipping are rounded, so a box of them can fall short of the part it
+  // bounds: a sliver leaning a fraction of an ulp off a plane comes out lying in it, and is then
+  // handed to one side only, possibly the wrong one, whose own clipping of the triangle keeps
+  // little or nothing of it. Widened by a margin far above the rounding (2^-20 of the
+  // triangle's magnitude), then cut back to the triangle's own box (its vertices are exact, so a
+  // triangle that does lie in a plane stays in it) and to the voxel.
+  if (n > 0) {
+    const glm::vec3 margin = glm::max(glm::abs(tri_box.lo), glm::abs(tri_box.hi)) * 0x1p-20f;
+    for (Aabb* b : {&bl, &br}) {
+      if (b->empty()) continue;
+      b->lo -= margin;
+      b->hi += margin;
+      *b = intersect_boxes(*b, tri_box);
+    }
+  }
   left = intersect_boxes(bl, voxel_left);
   if (left.empty()) left = intersect_boxes(tri_box, voxel_left);
   right = intersect_boxes(br, voxel_right);
