@@ -6,6 +6,7 @@
 #include "embree_reference.h"
 
 #include "artrace/core/simd_level.h"
+#include "artrace/core/wide_bvh.h"
 #include "artrace/io/aff_scene.h"
 
 #include <nlohmann/json.hpp>
@@ -315,12 +316,52 @@ void run(const Options& opt) {
   };
   const double hinted_ms = median_ms(opt.runs, hinted_pass);
   const double bounce_ms = median_ms(opt.runs, single_rays(bounce));
+
+  // The wide BVH for single and incoherent rays: built over the same triangles, checked to give
+  // the kd-tree's hits bit for bit on every primary and bounce ray, then timed.
+  core::WideBvh wide;
+  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris); }); });
+  const core::WideBvhStats wst = wide.stats();
+  out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
+                     {"triangles_in_blocks", wst.triangles_in_blocks}, {"max_depth", wst.max_depth}, {"sah_cost", wst.sah_cost}};
+  size_t wide_mismatch = 0;
+  for (const Workload* w : {&primary, &bounce}) {
+    for (size_t p = 0; p < w->packets.size(); ++p) {
+      for (int i = 0; i < kPacketSize; ++i) {
+        if (!((w->masks[p] >> i) & 1u)) continue;
+        const core::Ray r = w->packets[p].get(i);
+        const core::Hit a = tree.intersect(r), b = wide.intersect(r);
+        if (a.prim != b.prim || a.t != b.t || a.u != b.u || a.v != b.v) {
+          if (wide_mismatch++ == 0) {
+            const core::Hit c = core::intersect_brute_force(r, tris);
+            std::fprintf(stderr, "bench-core: the wide BVH and the kd-tree differ on the ray from (%.9g, %.9g, %.9g) along (%.9g, %.9g, %.9g): "
+                         "kd-tree triangle %u at t %.9g, wide BVH %u at %.9g, brute force %u at %.9g\n",
+                         r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, a.prim, a.t, b.prim, b.t, c.prim, c.t);
+          }
+        }
+      }
+    }
+  }
+  out["verify"]["wide_bvh_vs_kdtree_mismatches"] = wide_mismatch;
+  if (wide_mismatch) throw std::runtime_error("verification failed: " + std::to_string(wide_mismatch) + " wide BVH hits differ from the kd-tree's");
+  auto wide_rays = [&](const Workload& w) {
+    return pass(w, per_tile, [&, &w = w](size_t p) {
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((w.masks[p] >> i) & 1u) scratch[p].prim[i] = wide.intersect(w.packets[p].get(i)).prim;
+      }
+    });
+  };
+  const double wide_single_ms = median_ms(opt.runs, wide_rays(primary));
+  const double wide_bounce_ms = median_ms(opt.runs, wide_rays(bounce));
+
   out["ray_counts"] = {{"primary", primary.rays}, {"shadow", shadow.rays}, {"incoherent", bounce.rays}};
-  out["rays"] = {{"primary_single", mrays(primary.rays, single_ms)},
+  out["rays"] = {{"primary_single", mrays(primary.rays, wide_single_ms)},
+                 {"primary_single_kdtree", mrays(primary.rays, single_ms)},
                  {"primary_packet", mrays(primary.rays, packet_ms)},
                  {"shadow", mrays(shadow.rays, shadow_ms)},
                  {"shadow_hinted", mrays(shadow.rays, hinted_ms)},
-                 {"incoherent", mrays(bounce.rays, bounce_ms)}};
+                 {"incoherent", mrays(bounce.rays, wide_bounce_ms)},
+                 {"incoherent_kdtree", mrays(bounce.rays, bounce_ms)}};
 
   if (opt.reference == "embree") {
 #if defined(ARTRACE_HAVE_EMBREE)
@@ -408,11 +449,13 @@ void run(const Options& opt) {
     // ratios: the machine's drift over the benchmark cancels out.
     e["paired_ratio"] = {
         {"runs", opt.runs},
-        {"primary_single", paired_ratio(opt.runs, single_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
+        {"primary_single", paired_ratio(opt.runs, wide_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
+        {"primary_single_kdtree", paired_ratio(opt.runs, single_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
         {"primary_packet", paired_ratio(opt.runs, packet_pass, [&] { best_batch->restore(); }, embree_packet_pass)},
         {"shadow", paired_ratio(opt.runs, shadow_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
         {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
-        {"incoherent", paired_ratio(opt.runs, single_rays(bounce), [&] { bounce_batch.restore(); }, embree_bounce_pass)}};
+        {"incoherent", paired_ratio(opt.runs, wide_rays(bounce), [&] { bounce_batch.restore(); }, embree_bounce_pass)},
+        {"incoherent_kdtree", paired_ratio(opt.runs, single_rays(bounce), [&] { bounce_batch.restore(); }, embree_bounce_pass)}};
     out["embree"] = e;
 #else
     throw std::runtime_error("this build has no Embree (install libembree-dev and reconfigure)");
@@ -425,9 +468,12 @@ void run(const Options& opt) {
               opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
               st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
-  std::printf("  %-16s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
-  for (const char* key : {"primary_single", "primary_packet", "shadow", "shadow_hinted", "incoherent"}) {
-    std::printf("  %-16s %12.2f", key, out["rays"][key].get<double>());
+  std::printf("  wide BVH build %.1f ms, %u nodes, %u leaves (%u blocks of 4 for %u triangles), depth %u, SAH cost %.2f\n",
+              wide_build_ms, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
+  std::printf("  %-22s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
+  for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "shadow", "shadow_hinted", "incoherent",
+                          "incoherent_kdtree"}) {
+    std::printf("  %-22s %12.2f", key, out["rays"][key].get<double>());
     if (out.contains("embree") && out["embree"]["rays"].contains(key)) {
       std::printf(" %12.2f", out["embree"]["rays"][key].get<double>());
     }
@@ -440,11 +486,12 @@ void run(const Options& opt) {
                 e["build_ms"].get<double>(), e["primary_packet_best_width"].get<int>(), e["rays"]["primary_packet_4"].get<double>(),
                 e["rays"]["primary_packet_8"].get<double>(), e["rays"]["primary_packet_16"].get<double>(),
                 e["rays"]["shadow_incoherent_flag"].get<double>(), e["rays"]["shadow_coherent_flag"].get<double>());
-    std::printf("  speed ratio artrace / embree's best, runs in turns (median of %d pairs, order alternating): primary_single %.3f, "
-                "primary_packet %.3f, shadow %.3f, shadow_hinted %.3f, incoherent %.3f\n",
-                opt.runs, e["paired_ratio"]["primary_single"].get<double>(), e["paired_ratio"]["primary_packet"].get<double>(),
-                e["paired_ratio"]["shadow"].get<double>(), e["paired_ratio"]["shadow_hinted"].get<double>(),
-                e["paired_ratio"]["incoherent"].get<double>());
+    std::printf("  speed ratio artrace / embree's best, runs in turns (median of %d pairs, order alternating): primary_single %.3f "
+                "(kd-tree %.3f), primary_packet %.3f, shadow %.3f, shadow_hinted %.3f, incoherent %.3f (kd-tree %.3f)\n",
+                opt.runs, e["paired_ratio"]["primary_single"].get<double>(), e["paired_ratio"]["primary_single_kdtree"].get<double>(),
+                e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
+                e["paired_ratio"]["shadow_hinted"].get<double>(), e["paired_ratio"]["incoherent"].get<double>(),
+                e["paired_ratio"]["incoherent_kdtree"].get<double>());
     const nlohmann::json& wrong = e["shadow_disagreeing_lanes_wrong"];
     std::printf("  shadow packets answered differently by embree: %zu (the differing lanes, by brute force: %zu of "
                 "ours wrong, %zu of embree's)\n",

@@ -4,6 +4,7 @@
 #include "artrace/core/bvh.h"
 #include "artrace/core/kd_tree.h"
 #include "artrace/core/two_level_scene.h"
+#include "artrace/core/wide_bvh.h"
 
 #include <cmath>
 
@@ -45,6 +46,12 @@ struct PacketKernels {
   LaneMask (*two_level_transmittance)(const TwoLevelView&, const RayPacket&, LaneMask, float*);
 };
 
+/// Single rays through the wide BVH (wide_traversal.inc), one set per instruction set.
+struct SingleRayKernels {
+  Hit (*intersect)(const WideBvhView&, const Ray&);
+  bool (*occluded)(const WideBvhView&, const Ray&);
+};
+
 namespace sse {
 /// Single rays (width 1, compiled for the baseline instruction set).
 Hit intersect_single(const KdTreeView& tree, const Ray& ray);
@@ -62,11 +69,15 @@ bool two_level_occluded_single(const TwoLevelView& scene, const Ray& ray);
 const PacketKernels& kernels();
 /// The portable fallback: the lanes one after the other with the width-1 kernel.
 const PacketKernels& scalar_kernels();
+/// The wide BVH's single-ray kernels, 8-wide node tests as two 4-wide halves.
+const SingleRayKernels& single_kernels();
 }  // namespace sse
 
 namespace avx2 {
 /// Packets as two 8-wide halves; call only when the CPU has AVX2.
 const PacketKernels& kernels();
+/// The wide BVH's single-ray kernels, 8-wide node tests in one AVX register.
+const SingleRayKernels& single_kernels();
 }  // namespace avx2
 
 namespace avx512 {
@@ -77,5 +88,7 @@ const PacketKernels& kernels();
 
 /// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).
 const PacketKernels& packet_kernels();
+/// The single-ray kernels chosen likewise (AVX-512 machines use the AVX2 set).
+const SingleRayKernels& single_ray_kernels();
 
 }  // namespace artrace::core

@@ -41,8 +41,13 @@ const PacketKernels& kernels_for(SimdLevel level) {
   }
 }
 
+const SingleRayKernels& single_for(SimdLevel level) {
+  return level == SimdLevel::kAvx512 || level == SimdLevel::kAvx2 ? avx2::single_kernels() : sse::single_kernels();
+}
+
 SimdLevel g_level = resolve(SimdLevel::kAuto);
 PacketKernels g_kernels = kernels_for(g_level);
+SingleRayKernels g_single = single_for(g_level);
 
 }  // namespace
 
@@ -59,11 +64,14 @@ void set_simd_level(SimdLevel level) {
   }
   g_level = resolve(level);
   g_kernels = kernels_for(g_level);
+  g_single = single_for(g_level);
 }
 
 SimdLevel simd_level() { return g_level; }
 
 const PacketKernels& packet_kernels() { return g_kernels; }
+
+const SingleRayKernels& single_ray_kernels() { return g_single; }
 
 std::string to_string(SimdLevel level) {
   switch (level) {

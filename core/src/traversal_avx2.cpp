@@ -13,6 +13,7 @@
 namespace artrace::core::avx2 {
 #include "simd.inc"
 #include "traversal.inc"
+#include "wide_traversal.inc"
 
 namespace {
 
@@ -68,6 +69,11 @@ const PacketKernels& kernels() {
                                       &bvh_intersect_packet,       &bvh_occluded_packet,
                                       &two_level_intersect_packet, &two_level_occluded_packet,
                                       &transmittance_packet,       &two_level_transmittance_packet};
+  return kSet;
+}
+
+const SingleRayKernels& single_kernels() {
+  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1};
   return kSet;
 }
 

@@ -13,6 +13,7 @@
 namespace artrace::core::sse {
 #include "simd.inc"
 #include "traversal.inc"
+#include "wide_traversal.inc"
 
 namespace {
 
@@ -218,6 +219,11 @@ const PacketKernels& scalar_kernels() {
                                       &bvh_intersect_packet_scalar,       &bvh_occluded_packet_scalar,
                                       &two_level_intersect_packet_scalar, &two_level_occluded_packet_scalar,
                                       &transmittance_packet_scalar,       &two_level_transmittance_packet_scalar};
+  return kSet;
+}
+
+const SingleRayKernels& single_kernels() {
+  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1};
   return kSet;
 }
 

@@ -1,0 +1,247 @@
+#include "artrace/core/wide_bvh.h"
+#include "artrace/core/kd_tree.h"
+#include "artrace/core/simd_level.h"
+#include "../test_util.h"
+
+#include <tbb/task_arena.h>
+
+#include <cstring>
+#include <functional>
+#include <limits>
+
+namespace artrace::core {
+namespace {
+
+/// Every instruction set this CPU runs, for `fn(level name)`; the level is restored after.
+template <class Fn>
+void on_every_level(const Fn& fn) {
+  const SimdLevel saved = simd_level();
+  for (const SimdLevel level : {SimdLevel::kScalar, SimdLevel::kSse, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
+    if (!simd_level_supported(level)) {
+      std::cout << "[ note ] " << to_string(level) << " not supported by this CPU, not tested\n";
+      continue;
+    }
+    set_simd_level(level);
+    fn(to_string(level));
+  }
+  set_simd_level(saved);
+}
+
+/// Closest and any hits equal brute force bit for bit: the same triangle, t, u and v (the
+/// kernels run the brute force's arithmetic, and ties go to the smaller triangle either way).
+void expect_equals_brute_force(const WideBvh& bvh, const std::vector<Triangle>& tris, const std::vector<Ray>& rays,
+                               const std::string& what) {
+  size_t wrong = 0, hits = 0, blocked = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    const Hit ref = intersect_brute_force(rays[i], tris);
+    const Hit got = bvh.intersect(rays[i]);
+    hits += ref.valid();
+    const bool same = ref.prim == got.prim && (!ref.valid() || (ref.t == got.t && ref.u == got.u && ref.v == got.v));
+    if (!same && ++wrong <= 5) {
+      ADD_FAILURE() << what << ": ray " << i << " brute force prim " << ref.prim << " t " << ref.t << ", wide BVH prim "
+                    << got.prim << " t " << got.t;
+    }
+    const bool occluded = occluded_brute_force(rays[i], tris);
+    blocked += occluded;
+    if (occluded != bvh.occluded(rays[i]) && ++wrong <= 5) {
+      ADD_FAILURE() << what << ": ray " << i << " any hit: brute force " << occluded;
+    }
+  }
+  EXPECT_EQ(wrong, 0u) << what;
+  EXPECT_GT(hits, rays.size() / 20) << what << ": the test rays should hit something";
+  EXPECT_LT(blocked, rays.size()) << what << ": and miss sometimes";
+}
+
+TEST(WideBvh, EmptySceneAndOneTriangle) {
+  const WideBvh none(std::vector<Triangle>{});
+  EXPECT_TRUE(none.empty());
+  EXPECT_FALSE(none.intersect(Ray{{0, 0, 0}, {1, 0, 0}}).valid());
+  EXPECT_FALSE(none.occluded(Ray{{0, 0, 0}, {1, 0, 0}}));
+  const WideBvh one(std::vector<Triangle>{{{0, 0, 5}, {1, 0, 5}, {0, 1, 5}}});
+  const Hit h = one.intersect(Ray{{0.25f, 0.25f, 0}, {0, 0, 1}});
+  ASSERT_TRUE(h.valid());
+  EXPECT_EQ(h.t, 5.0f);
+  EXPECT_EQ(h.u, 0.25f);
+  EXPECT_EQ(h.v, 0.25f);
+  EXPECT_FALSE(one.intersect(Ray{{0.25f, 0.25f, 0}, {0, 0, 1}, 0.0f, 4.99f}).valid()) << "tmax is respected";
+  EXPECT_TRUE(one.occluded(Ray{{0.25f, 0.25f, 0}, {0, 0, 1}, 0.0f, 5.0f})) << "tmax is inclusive";
+  EXPECT_FALSE(one.occluded(Ray{{0.25f, 0.25f, 0}, {0, 0, 1}, 5.0f, 9.0f})) << "tmin is exclusive";
+}
+
+TEST(WideBvh, RandomSoupsEqualBruteForceOnEveryInstructionSet) {
+  for (const uint32_t seed : {1u, 2u, 3u}) {
+    std::mt19937 rng(seed);
+    const auto tris = test::random_soup(rng, 3000, seed == 3 ? 2.0f : 0.4f);
+    std::vector<Ray> rays = test::random_rays(rng, 4000);
+    for (size_t i = 0; i < rays.size(); i += 3) rays[i].tmax = 3.0f;  // segments, as shadow rays are
+    const WideBvh bvh(tris);
+    on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "seed " + std::to_string(seed) + ", " + level); });
+  }
+}
+
+TEST(WideBvh, AdversarialCasesEqualBruteForce) {
+  const auto tris = test::adversarial_scene();
+  std::mt19937 rng(7);
+  std::vector<Ray> rays = test::random_rays(rng, 3000);
+  // through every vertex and edge midpoint, from random origins and along the axes (directions
+  // with zero components: infinite inverse directions, NaN slab distances on box planes)
+  for (const Triangle& t : tris) {
+    for (const glm::vec3 p : {t.v0, t.v1, t.v2, 0.5f * (t.v0 + t.v1), 0.5f * (t.v1 + t.v2)}) {
+      const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+      rays.push_back(Ray{o, p - o});
+      rays.push_back(Ray{p + glm::vec3(0, 5, 0), {0, -1, 0}});
+      rays.push_back(Ray{p - glm::vec3(5, 0, 0), {1, 0, 0}});
+      rays.push_back(Ray{p + glm::vec3(0, 0, 5), {0, 0, -1}});
+    }
+  }
+  // lying in the boxes' faces
+  rays.push_back(Ray{{-2, 0, 0.5f}, {1, 0, 0}});
+  rays.push_back(Ray{{1, 0.5f, -3}, {0, 0, 1}});
+  rays.push_back(Ray{{1, 1, -3}, {0, 0, 1}});
+  for (const uint32_t max_leaf : {1u, 8u, 32u}) {
+    WideBvhBuildOptions opt;
+    opt.max_leaf = max_leaf;
+    const WideBvh bvh(tris, opt);
+    on_every_level([&](const std::string& level) {
+      expect_equals_brute_force(bvh, tris, rays, "max_leaf " + std::to_string(max_leaf) + ", " + level);
+    });
+  }
+}
+
+TEST(WideBvh, SliversLeaningOffBoxPlanesEqualBruteForce) {
+  std::vector<Triangle> tris;
+  std::vector<Ray> rays;
+  test::sliver_scene(tris, rays);
+  for (int i = 0; i < 50; ++i) rays.push_back(Ray{{1.0f + 0.04f * i, 3.0f, 0.5f}, {0.1f, 1.0f, 0.0f}});  // above it all, going up
+  const WideBvh bvh(tris);
+  on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "slivers, " + level); });
+}
+
+/// The same Hit as the kd-tree, bit for bit, on every ray: either structure may serve a ray.
+TEST(WideBvh, SameHitsAsTheKdTree) {
+  std::mt19937 rng(12);
+  auto tris = test::random_soup(rng, 20000, 0.3f);
+  const auto sphere = test::closed_sphere({5, 5, 5}, 2.0f, 30);
+  tris.insert(tris.end(), sphere.begin(), sphere.end());
+  const KdTree kd(tris);
+  const WideBvh bvh(tris);
+  size_t hits = 0;
+  for (const Ray& r : test::random_rays(rng, 20000)) {
+    const Hit a = kd.intersect(r), b = bvh.intersect(r);
+    ASSERT_EQ(a.prim, b.prim);
+    ASSERT_EQ(a.t, b.t);
+    ASSERT_EQ(a.u, b.u);
+    ASSERT_EQ(a.v, b.v);
+    hits += a.valid();
+  }
+  EXPECT_GT(hits, 5000u);
+}
+
+/// Triangles in geometric progression, each half the last and nested at the origin's corner:
+/// every binned split peels off one triangle, so past a depth the builder halves the ranges; the
+/// depth (and the traversal's stack) stays bounded and the hits stay right.
+TEST(WideBvh, InputsThatDefeatTheSahKeepABoundedDepth) {
+  std::vector<Triangle> tris;
+  float s = 1.0f;
+  for (int i = 0; i < 3000; ++i, s *= 0.97f) {
+    tris.push_back({{s, 0, 0}, {0, s, 0}, {0, 0, s}});
+    tris.push_back({{s, 0, 0.01f * s}, {0, s, 0.01f * s}, {s, s, 0.01f * s}});
+  }
+  WideBvhBuildOptions opt;
+  opt.bins = 2;  // the coarsest bins: the SAH has almost nothing to choose from
+  const WideBvh bvh(tris, opt);
+  const WideBvhStats st = bvh.stats(opt);
+  EXPECT_LE(st.max_depth, 24u + 11u);
+  EXPECT_EQ(st.triangles_in_blocks, tris.size());
+  std::mt19937 rng(4);
+  std::vector<Ray> rays;
+  for (int i = 0; i < 3000; ++i) {
+    const glm::vec3 target = test::random_point(rng, 0.0f, 0.5f) * test::random_point(rng, 0.0f, 1.0f).x;
+    const glm::vec3 o = test::random_point(rng, -2.0f, 2.0f);
+    rays.push_back(Ray{o, target - o});
+  }
+  expect_equals_brute_force(bvh, tris, rays, "geometric progression");
+}
+
+TEST(WideBvh, NonFiniteTrianglesAreLeftOutAndNeverHit) {
+  std::mt19937 rng(5);
+  auto tris = test::random_soup(rng, 500, 0.5f);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  tris.push_back({{0, 0, 0}, {inf, 0, 0}, {0, 1, 0}});
+  tris.push_back({{nan, 0, 0}, {1, 0, 0}, {0, 1, 0}});
+  const WideBvh bvh(tris);
+  EXPECT_EQ(bvh.stats().triangles_in_blocks, 500u);
+  expect_equals_brute_force(bvh, tris, test::random_rays(rng, 2000), "non-finite");
+}
+
+TEST(WideBvh, BuildIsIdenticalForAnyThreadCount) {
+  std::mt19937 rng(3);
+  const auto tris = test::random_soup(rng, 30000, 0.3f);
+  WideBvhBuildOptions opt;
+  opt.parallel_above = 256;  // many parallel joins even on this small scene
+  auto build = [&](int threads) {
+    tbb::task_arena arena(threads);
+    WideBvh bvh;
+    arena.execute([&] { bvh = WideBvh(tris, opt); });
+    return bvh;
+  };
+  const WideBvh one = build(1), two = build(2), four = build(4);
+  for (const WideBvh* other : {&two, &four}) {
+    ASSERT_EQ(one.nodes().size(), other->nodes().size());
+    ASSERT_EQ(one.blocks().size(), other->blocks().size());
+    EXPECT_EQ(0, std::memcmp(one.nodes().data(), other->nodes().data(), one.nodes().size() * sizeof(WideNode)));
+    EXPECT_EQ(0, std::memcmp(one.blocks().data(), other->blocks().data(), one.blocks().size() * sizeof(TriBlock)));
+  }
+}
+
+/// Every triangle sits in exactly one leaf lane, leaves hold at most max_leaf, and every child
+/// box holds the triangles below it.
+TEST(WideBvh, EveryTriangleOnceInsideItsBoxes) {
+  std::mt19937 rng(8);
+  const auto tris = test::random_soup(rng, 5000, 0.6f);
+  WideBvhBuildOptions opt;
+  opt.max_leaf = 6;
+  const WideBvh bvh(tris, opt);
+  std::vector<int> seen(tris.size(), 0);
+  std::function<void(uint32_t, const Aabb&)> visit = [&](uint32_t ref, const Aabb& box) {
+    if (WideNode::is_leaf(ref)) {
+      uint32_t in_leaf = 0;
+      for (uint32_t b = 0; b < WideNode::block_count(ref); ++b) {
+        for (const uint32_t p : bvh.blocks()[WideNode::first_block(ref) + b].prim) {
+          if (p == kInvalidId) continue;
+          ++seen[p];
+          ++in_leaf;
+          const Aabb t = Aabb::of(tris[p]);
+          for (int a = 0; a < 3; ++a) {
+            EXPECT_LE(box.lo[a], t.lo[a]);
+            EXPECT_GE(box.hi[a], t.hi[a]);
+          }
+        }
+      }
+      EXPECT_LE(in_leaf, opt.max_leaf);
+      return;
+    }
+    const WideNode& n = bvh.nodes()[ref];
+    int used = 0;
+    for (int c = 0; c < 8; ++c) {
+      if (n.child[c] == WideNode::kEmpty) continue;
+      ++used;
+      Aabb b;
+      b.lo = {n.lo[0][c], n.lo[1][c], n.lo[2][c]};
+      b.hi = {n.hi[0][c], n.hi[1][c], n.hi[2][c]};
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_LE(box.lo[a], b.lo[a]);
+        EXPECT_GE(box.hi[a], b.hi[a]);
+      }
+      visit(n.child[c], b);
+    }
+    EXPECT_GE(used, 2) << "a node has at least two children";
+  };
+  Aabb all;
+  for (const Triangle& t : tris) all.extend(Aabb::of(t));
+  visit(bvh.view().root, all);
+  for (size_t p = 0; p < tris.size(); ++p) ASSERT_EQ(seen[p], 1) << "triangle " << p;
+}
+
+}  // namespace
+}  // namespace artrace::core
