@@ -320,7 +320,11 @@ void run(const Options& opt) {
   // The wide BVH for single and incoherent rays: built over the same triangles, checked to give
   // the kd-tree's hits bit for bit on every primary and bounce ray, then timed.
   core::WideBvh wide;
-  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris); }); });
+  core::WideBvhBuildOptions wopt;
+  if (getenv("WB")) wopt.bins = atoi(getenv("WB"));
+  if (getenv("WL")) wopt.max_leaf = atoi(getenv("WL"));
+  if (getenv("WN")) wopt.node_cost = atof(getenv("WN"));
+  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris, wopt); }); });
   const core::WideBvhStats wst = wide.stats();
   out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
                      {"triangles_in_blocks", wst.triangles_in_blocks}, {"max_depth", wst.max_depth}, {"sah_cost", wst.sah_cost}};
@@ -352,6 +356,9 @@ void run(const Options& opt) {
     });
   };
   const double wide_single_ms = median_ms(opt.runs, wide_rays(primary));
+  // the bounce rays as the kd-tree's packets (8 neighbouring pixels' bounces a packet)
+  const double bounce_packet_ms =
+      median_ms(opt.runs, pass(bounce, per_tile, [&](size_t p) { tree.intersect(bounce.packets[p], bounce.masks[p], scratch[p]); }));
   const double wide_bounce_ms = median_ms(opt.runs, wide_rays(bounce));
 
   out["ray_counts"] = {{"primary", primary.rays}, {"shadow", shadow.rays}, {"incoherent", bounce.rays}};
@@ -361,7 +368,8 @@ void run(const Options& opt) {
                  {"shadow", mrays(shadow.rays, shadow_ms)},
                  {"shadow_hinted", mrays(shadow.rays, hinted_ms)},
                  {"incoherent", mrays(bounce.rays, wide_bounce_ms)},
-                 {"incoherent_kdtree", mrays(bounce.rays, bounce_ms)}};
+                 {"incoherent_kdtree", mrays(bounce.rays, bounce_ms)},
+                 {"incoherent_kdtree_packets", mrays(bounce.rays, bounce_packet_ms)}};
 
   if (opt.reference == "embree") {
 #if defined(ARTRACE_HAVE_EMBREE)
@@ -468,11 +476,11 @@ void run(const Options& opt) {
               opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
               st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
-  std::printf("  wide BVH build %.1f ms, %u nodes, %u leaves (%u blocks of 4 for %u triangles), depth %u, SAH cost %.2f\n",
+  std::printf("  wide BVH build %.1f ms, %u nodes, %u leaves (%u blocks of 8 for %u triangles), depth %u, SAH cost %.2f\n",
               wide_build_ms, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
   std::printf("  %-22s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
   for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "shadow", "shadow_hinted", "incoherent",
-                          "incoherent_kdtree"}) {
+                          "incoherent_kdtree", "incoherent_kdtree_packets"}) {
     std::printf("  %-22s %12.2f", key, out["rays"][key].get<double>());
     if (out.contains("embree") && out["embree"]["rays"].contains(key)) {
       std::printf(" %12.2f", out["embree"]["rays"][key].get<double>());

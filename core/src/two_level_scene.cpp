@@ -182,8 +182,9 @@ TwoLevelScene::Config TwoLevelScene::parse_config(const std::string& name) {
   throw std::invalid_argument("unknown scene configuration '" + name + "' (expected bvh or kdtree+bvh)");
 }
 
-void TwoLevelScene::set_static(std::vector<Triangle> tris) {
+void TwoLevelScene::set_static(std::vector<Triangle> tris, bool single_ray_bvh) {
   if (config_ == Config::kKdTreeBvh) {
+    wide_ = single_ray_bvh ? WideBvh(tris) : WideBvh();
     kd_ = KdTree(std::move(tris));
   } else {
     static_bvh_ = std::make_unique<Bvh>(std::move(tris));
@@ -377,7 +378,7 @@ Hit TwoLevelScene::intersect(const Ray& ray) const {
   require_committed(dirty_);
   Hit h;
   if (config_ == Config::kKdTreeBvh) {
-    h = kd_.intersect(ray);
+    h = wide_.empty() ? kd_.intersect(ray) : wide_.intersect(ray);
     if (h.valid()) h.inst = kStaticObject;
   }
   const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
@@ -387,7 +388,7 @@ Hit TwoLevelScene::intersect(const Ray& ray) const {
 
 bool TwoLevelScene::occluded(const Ray& ray) const {
   require_committed(dirty_);
-  if (config_ == Config::kKdTreeBvh && kd_.occluded(ray)) return true;
+  if (config_ == Config::kKdTreeBvh && (wide_.empty() ? kd_.occluded(ray) : wide_.occluded(ray))) return true;
   const TwoLevelView view{top_.data(), order_.data(), data_.data(), static_cast<uint32_t>(top_.size())};
   return sse::two_level_occluded_single(view, ray);
 }

@@ -18,7 +18,7 @@ bool finite(const Triangle& t) {
          std::isfinite(t.v2.z);
 }
 
-uint32_t blocks_for(uint32_t n) { return (n + 3u) / 4u; }
+uint32_t blocks_for(uint32_t n) { return (n + kBlockLanes - 1u) / kBlockLanes; }
 
 /// Wide levels split by the SAH; below, ranges are halved (see Builder::split). Each wide level
 /// leaves at most seven entries on the traversal's stack: 7 (kSahDepth + 11) < kWideStack for
@@ -77,7 +77,7 @@ class Builder {
   /// The best binary split of `r` by the SAH, in place; false when a leaf is cheaper (and allowed).
   bool split(const Range& r, Range& left, Range& right, uint32_t depth) {
     const uint32_t n = r.size();
-    if (n <= 4) return false;  // one block: no split beats testing it
+    if (n <= kBlockLanes / 2) return false;  // half a block: no split beats testing it
     if (depth >= kSahDepth) {
       // past this depth (inputs that defeat the SAH, e.g. sizes in geometric progression) the
       // ranges are halved, which bounds the depth and with it the traversal's stack
@@ -160,18 +160,20 @@ class Builder {
     return static_cast<int>(f);
   }
 
-  /// The leaf of `r`: its triangles in blocks of four.
+  /// The leaf of `r`: its triangles in blocks of kBlockLanes.
   uint32_t leaf(const Range& r, Sub& out) const {
     const uint32_t first = static_cast<uint32_t>(out.blocks.size());
     const uint32_t n = r.size();
     const uint32_t blocks = blocks_for(n);
     for (uint32_t b = 0; b < blocks; ++b) {
       TriBlock block{};
-      for (int l = 0; l < 4; ++l) {
-        const uint32_t i = r.begin + 4 * b + static_cast<uint32_t>(l);
+      for (int l = 0; l < kBlockLanes; ++l) {
+        const uint32_t i = r.begin + kBlockLanes * b + static_cast<uint32_t>(l);
         const uint32_t p = i < r.end ? prims_[i] : kInvalidId;
         block.prim[l] = p;
-        const Triangle& t = tris_[p == kInvalidId ? prims_[r.begin] : p];  // an empty lane repeats the first (masked)
+        // an empty lane repeats the block's first triangle: its hits are that triangle's, and
+        // never win (kInvalidId loses every tie), so the kernels need no mask of used lanes
+        const Triangle& t = tris_[p == kInvalidId ? prims_[r.begin + kBlockLanes * b] : p];
         const glm::vec3* v[3] = {&t.v0, &t.v1, &t.v2};
         for (int k = 0; k < 3; ++k)
           for (int a = 0; a < 3; ++a) block.v[k][a][l] = (*v[k])[a];

@@ -163,6 +163,42 @@ TEST(TwoLevelScene, ConfigurationsGiveIdenticalHitsOnStaticGeometry) {
   }
 }
 
+/// Single rays through the wide BVH over the static geometry (the default) and through the kd-tree
+/// give the same hits, closest and any, with instances in front of and behind the static soup.
+TEST(TwoLevelScene, SingleRaysGiveTheSameHitsWithAndWithoutTheWideBvh) {
+  std::mt19937 rng(44);
+  const auto tris = test::random_soup(rng, 3000, 0.4f);
+  const auto box = test::random_soup(rng, 200, 0.3f);
+  TwoLevelScene a(Config::kKdTreeBvh), b(Config::kKdTreeBvh);
+  a.set_static(tris);
+  b.set_static(tris, false);
+  for (TwoLevelScene* s : {&a, &b}) {
+    const MeshHandle m = s->add_rigid_mesh(box);
+    s->add_instance(m, glm::translate(glm::mat4(1.0f), glm::vec3(-3.0f, 0.0f, 0.0f)));
+    s->add_instance(m, glm::scale(glm::mat4(1.0f), glm::vec3(0.5f)));
+    s->commit();
+  }
+  size_t static_hits = 0, instance_hits = 0;
+  const std::vector<Ray> rays = test::random_rays(rng, 4000);
+  for (size_t i = 0; i < rays.size(); ++i) {
+    Ray r = rays[i];
+    if (i % 3 == 0) r.tmax = 4.0f;  // segments too
+    const Hit ha = a.intersect(r), hb = b.intersect(r);
+    ASSERT_EQ(ha.prim, hb.prim);
+    ASSERT_EQ(ha.inst, hb.inst);
+    if (ha.valid()) {
+      ASSERT_EQ(ha.t, hb.t);
+      ASSERT_EQ(ha.u, hb.u);
+      ASSERT_EQ(ha.v, hb.v);
+      (ha.inst == kStaticObject ? static_hits : instance_hits) += 1;
+    }
+    ASSERT_EQ(a.occluded(r), b.occluded(r));
+    ASSERT_EQ(a.occluded(r), ha.valid());
+  }
+  EXPECT_GT(static_hits, 500u);
+  EXPECT_GT(instance_hits, 20u);
+}
+
 /// A deforming mesh whose vertices are scrambled every frame stays exact.
 TEST(TwoLevelScene, ScrambledDeformingMeshStaysCorrect) {
   std::mt19937 rng(43);

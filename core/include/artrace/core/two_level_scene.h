@@ -12,6 +12,7 @@
 
 #include "artrace/core/bvh.h"
 #include "artrace/core/kd_tree.h"
+#include "artrace/core/wide_bvh.h"
 
 #include <memory>
 #include <string>
@@ -94,8 +95,11 @@ class TwoLevelScene {
 
   explicit TwoLevelScene(Config config = Config::kKdTreeBvh) : config_(config) {}
 
-  /// The geometry that never moves (kd-tree or lazy BVH, by configuration).
-  void set_static(std::vector<Triangle> tris);
+  /// The geometry that never moves (kd-tree or lazy BVH, by configuration). With the kd-tree,
+  /// `single_ray_bvh` also builds a WideBvh over it, which serves the single-ray queries
+  /// (reflection and refraction rays are incoherent: it traces them about twice as fast as the
+  /// kd-tree, bench-core); packets keep the kd-tree. Hits are the same either way, to the bit.
+  void set_static(std::vector<Triangle> tris, bool single_ray_bvh = true);
   /// A rigid mesh in object space; its BVH is built lazily and shared by its instances.
   MeshHandle add_rigid_mesh(std::vector<Triangle> object_space);
   InstanceHandle add_instance(MeshHandle mesh, const glm::mat4& world_from_object);
@@ -180,6 +184,7 @@ class TwoLevelScene {
 
   Config config_;
   KdTree kd_;
+  WideBvh wide_;  ///< empty unless set_static built it
   std::unique_ptr<Bvh> static_bvh_;
   std::vector<float> static_pass_;
   bool has_transmittance_ = false;

@@ -5,11 +5,11 @@
 // unpredictable branches a level, some 25 levels on the BART kitchen, which caps single and
 // incoherent rays far below what a wide BVH gives: one node test there answers eight boxes in one
 // pass of SIMD arithmetic (8-wide with AVX2, two 4-wide halves on the baseline), and a leaf tests
-// up to four triangles at once. This structure serves those rays; the kd-tree keeps the packets.
+// up to eight triangles at once. This structure serves those rays; the kd-tree keeps the packets.
 //
 // Build: a binned SAH (I. Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies",
 // IEEE Symposium on Interactive Ray Tracing 2007) splitting binary, with leaves costed by the
-// four-triangle blocks they take; a wide node gathers up to eight children by splitting the
+// eight-triangle blocks they take; a wide node gathers up to eight children by splitting the
 // child of largest surface area again and again (as in Wald, Benthin & Boulos, "Getting Rid of
 // Packets", IEEE Symposium on Interactive Ray Tracing 2008). Large subtrees are built in
 // parallel and joined in a fixed order: the arrays do not depend on the thread count.
@@ -46,17 +46,20 @@ struct alignas(32) WideNode {
 };
 static_assert(sizeof(WideNode) == 224, "a wide node is seven 32-byte lines");
 
-/// Up to four triangles, structure of arrays: v[vertex][axis][lane]; a lane without a triangle
-/// has prim = kInvalidId.
-struct alignas(16) TriBlock {
-  float v[3][3][4];
-  uint32_t prim[4];
+/// Triangles a leaf block holds: one 8-wide test (an AVX register, two SSE halves).
+inline constexpr int kBlockLanes = 8;
+
+/// Up to kBlockLanes triangles, structure of arrays: v[vertex][axis][lane]; a lane without a
+/// triangle has prim = kInvalidId and repeats lane 0's vertices.
+struct alignas(32) TriBlock {
+  float v[3][3][kBlockLanes];
+  uint32_t prim[kBlockLanes];
 };
 
 struct WideBvhBuildOptions {
   int bins = 32;              ///< SAH bins per axis
   float node_cost = 1.0f;     ///< cost of a node test, relative to
-  float block_cost = 1.0f;    ///< the cost of testing a block of four triangles
+  float block_cost = 1.0f;    ///< the cost of testing a block of kBlockLanes triangles
   uint32_t max_leaf = 8;      ///< triangles a leaf at most (up to 32)
   uint32_t parallel_above = 16384;  ///< subtrees with more triangles are built as parallel tasks
 };
