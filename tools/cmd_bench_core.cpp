@@ -320,11 +320,7 @@ void run(const Options& opt) {
   // The wide BVH for single and incoherent rays: built over the same triangles, checked to give
   // the kd-tree's hits bit for bit on every primary and bounce ray, then timed.
   core::WideBvh wide;
-  core::WideBvhBuildOptions wopt;
-  if (getenv("WB")) wopt.bins = atoi(getenv("WB"));
-  if (getenv("WL")) wopt.max_leaf = atoi(getenv("WL"));
-  if (getenv("WN")) wopt.node_cost = atof(getenv("WN"));
-  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris, wopt); }); });
+  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris); }); });
   const core::WideBvhStats wst = wide.stats();
   out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
                      {"triangles_in_blocks", wst.triangles_in_blocks}, {"max_depth", wst.max_depth}, {"sah_cost", wst.sah_cost}};
