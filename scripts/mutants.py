@@ -78,6 +78,10 @@ CATALOGUE = [
     ("wide-build-sah-depth-unbounded", "core/src/wide_bvh_build.cpp",
      "if (depth >= kSahDepth) {", "if (false) {",
      "inputs that defeat the SAH would build trees deeper than the traversal's stack"),
+    # Table 1's workloads
+    ("whitted-paper-mode-shadows-everywhere", "core/include/artrace/core/whitted.h",
+     "(m == ShadingMode::kPaper && depth == 0)", "m == ShadingMode::kPaper",
+     "the paper's workload would trace shadow rays at secondary hits too: full Whitted under another name"),
     # ONI writer
     ("oni-seek-table-offsets", "io/src/oni_writer.cpp",
      "std::memcpy(entry + 12, &n->data_offsets[k], 8);", "std::memcpy(entry + 12, &n->added_offset, 8);",

@@ -157,7 +157,8 @@ ShadingMode parse_shading_mode(const std::string& name) {
   if (name == "shadows") return ShadingMode::kShadows;
   if (name == "reflect") return ShadingMode::kReflect;
   if (name == "all") return ShadingMode::kAll;
-  throw std::invalid_argument("unknown shading mode \"" + name + "\" (diffuse, shadows, reflect or all)");
+  if (name == "paper") return ShadingMode::kPaper;
+  throw std::invalid_argument("unknown shading mode \"" + name + "\" (diffuse, shadows, reflect, all or paper)");
 }
 
 const char* to_string(ShadingMode m) {
@@ -166,6 +167,7 @@ const char* to_string(ShadingMode m) {
     case ShadingMode::kShadows: return "shadows";
     case ShadingMode::kReflect: return "reflect";
     case ShadingMode::kAll: return "all";
+    case ShadingMode::kPaper: return "paper";
   }
   return "?";
 }

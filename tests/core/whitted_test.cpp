@@ -402,6 +402,37 @@ TEST(Whitted, TheFourModesDifferExactlyInTheEffectsTheyInclude) {
   EXPECT_GT(reflecting, 100) << "the mirror and the glass";
 }
 
+/// The paper's workload (shadow rays at camera hits only) is, pixel by pixel, the shadows image plus
+/// what reflection and refraction add without shadows: (d') = (b) + (c) - (a), the identity the
+/// paper's Table 1 satisfies. Full Whitted differs from it only by taking light away, where a
+/// reflected or refracted point lies in a shadow.
+TEST(Whitted, PaperWorkloadIsShadowsPlusUnshadowedSecondaryRays) {
+  const TestScene s = room();
+  const Camera cam = room_camera(64, 48);
+  Image img[5];
+  for (const ShadingMode mode : {ShadingMode::kDiffuse, ShadingMode::kShadows, ShadingMode::kReflect, ShadingMode::kAll,
+                                 ShadingMode::kPaper}) {
+    WhittedOptions o;
+    o.mode = mode;
+    o.threads = 2;
+    img[static_cast<int>(mode)] = render_whitted(s.shading, cam, o);
+  }
+  const Image &a = img[0], &b = img[1], &c = img[2], &d = img[3], &paper = img[4];
+  int darker_in_full = 0;
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(paper.at(x, y)[k], b.at(x, y)[k] + c.at(x, y)[k] - a.at(x, y)[k], 1e-5f) << x << "," << y;
+        EXPECT_LE(d.at(x, y)[k], paper.at(x, y)[k] + 1e-6f) << x << "," << y;
+      }
+      darker_in_full += d.at(x, y) != paper.at(x, y);
+    }
+  }
+  EXPECT_GT(darker_in_full, 5) << "the mirror shows the floating tile's shadow in full Whitted only";
+  EXPECT_EQ(parse_shading_mode("paper"), ShadingMode::kPaper);
+  EXPECT_STREQ(to_string(ShadingMode::kPaper), "paper");
+}
+
 TEST(Whitted, SameImageForAnyThreadCountAndWithSecondaryPacketsOrSingleRays) {
   const TestScene s = room();
   const Camera cam = room_camera(80, 56);
