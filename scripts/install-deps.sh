@@ -10,6 +10,8 @@ packages=(
   libgtest-dev libgmock-dev
   libembree-dev
   xvfb  # the replay viewer's test runs under a virtual display
+  slurm-wlm munge  # the sharded-export test starts a single-node Slurm cluster
+  clang  # the libFuzzer harnesses (scripts/fuzz.sh)
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -17,6 +17,8 @@ int main(int argc, char** argv) {
   artrace::tools::add_replay_command(app);
   artrace::tools::add_bench_bart_command(app);
   artrace::tools::add_bench_ar_command(app);
+  artrace::tools::add_join_command(app);
+  artrace::tools::add_batch_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -5,6 +5,7 @@
 // laid out like Table 1 with the paper's times beside ours, and draws Figures 2 and 3.
 #include "bench_util.h"
 #include "commands.h"
+#include "plot.h"
 
 #include "artrace/core/simd_level.h"
 #include "artrace/io/bart_shading.h"
@@ -154,58 +155,6 @@ struct ReportOptions {
 double paper_seconds(const std::string& scene, const std::string& config) {
   if (config == "kdtree+bvh") return scene == "kitchen" ? 380.06 : 509.00;
   return scene == "kitchen" ? 966.10 : 3275.54;
-}
-
-/// Per-frame curves drawn with OpenCV: axes, ticks, a legend.
-void plot(const std::string& title, const std::vector<std::pair<std::string, std::vector<double>>>& series,
-          const std::filesystem::path& file) {
-  const int w = 900, h = 460, left = 70, right = 20, top = 40, bottom = 50;
-  cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
-  double ymax = 1e-9;
-  size_t n = 0;
-  for (const auto& s : series) {
-    for (double v : s.second) ymax = std::max(ymax, v);
-    n = std::max(n, s.second.size());
-  }
-  ymax *= 1.3;  // headroom for the legend above the curves
-  const double step = ymax > 100 ? 50 : ymax > 40 ? 10 : ymax > 10 ? 5 : ymax > 4 ? 1 : 0.5;
-  ymax = std::ceil(ymax / step) * step;
-  auto X = [&](double i) { return left + static_cast<int>((w - left - right) * i / std::max<double>(1, n - 1)); };
-  auto Y = [&](double v) { return h - bottom - static_cast<int>((h - top - bottom) * v / ymax); };
-  const cv::Scalar axis(0, 0, 0), grid(225, 225, 225);
-  for (double v = 0; v <= ymax + 1e-9; v += step) {
-    cv::line(img, {left, Y(v)}, {w - right, Y(v)}, grid);
-    char label[32];
-    std::snprintf(label, sizeof(label), "%g", v);
-    cv::putText(img, label, {8, Y(v) + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1, cv::LINE_AA);
-  }
-  for (size_t i = 0; i < n; i += n > 400 ? 100 : n > 100 ? 50 : n > 20 ? 10 : 1) {
-    cv::line(img, {X(i), h - bottom}, {X(i), h - bottom + 5}, axis);
-    cv::putText(img, std::to_string(i), {X(i) - 10, h - bottom + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1, cv::LINE_AA);
-  }
-  cv::line(img, {left, top}, {left, h - bottom}, axis);
-  cv::line(img, {left, h - bottom}, {w - right, h - bottom}, axis);
-  cv::putText(img, "frame", {w / 2 - 20, h - 12}, cv::FONT_HERSHEY_SIMPLEX, 0.5, axis, 1, cv::LINE_AA);
-  cv::putText(img, "ms", {8, top - 12}, cv::FONT_HERSHEY_SIMPLEX, 0.5, axis, 1, cv::LINE_AA);
-  cv::putText(img, title, {left + 10, 24}, cv::FONT_HERSHEY_SIMPLEX, 0.55, axis, 1, cv::LINE_AA);
-  const cv::Scalar colours[] = {{200, 90, 20}, {30, 30, 210}, {40, 160, 40}, {150, 40, 150}, {20, 150, 200}};
-  for (size_t s = 0; s < series.size(); ++s) {
-    const auto& v = series[s].second;
-    for (size_t i = 1; i < v.size(); ++i) cv::line(img, {X(i - 1), Y(v[i - 1])}, {X(i), Y(v[i])}, colours[s % 5], 1, cv::LINE_AA);
-  }
-  // the legend last, on a white box, so that no curve runs through its labels
-  const int rows = static_cast<int>(series.size());
-  cv::rectangle(img, {w - 268, top}, {w - right - 4, top + 20 * rows + 6}, cv::Scalar(255, 255, 255), cv::FILLED);
-  cv::rectangle(img, {w - 268, top}, {w - right - 4, top + 20 * rows + 6}, grid);
-  for (size_t s = 0; s < series.size(); ++s) {
-    cv::line(img, {w - 260, top + 10 + 20 * static_cast<int>(s)}, {w - 230, top + 10 + 20 * static_cast<int>(s)}, colours[s % 5], 2);
-    cv::putText(img, series[s].first, {w - 222, top + 15 + 20 * static_cast<int>(s)}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1,
-                cv::LINE_AA);
-  }
-  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
-  const std::filesystem::path tmp = file.parent_path() / (file.stem().string() + ".partial.png");
-  if (!cv::imwrite(tmp.string(), img)) throw std::runtime_error(file.string() + ": cannot write PNG");
-  std::filesystem::rename(tmp, file);
 }
 
 void run_report(const ReportOptions& ro) {

@@ -1,10 +1,12 @@
 // artrace export: composites an AR scene into a recording and writes a clip (video through
-// OpenCV: H.264 where available, MPEG-4 otherwise; or numbered PNGs). The output appears under its
-// final name only when complete; Ctrl-C stops cleanly and leaves nothing behind.
+// OpenCV: H.264 where available, MPEG-4 otherwise; or numbered PNGs with a shard.json naming the
+// frames, which artrace join puts together). The output appears under its final name only when
+// complete; Ctrl-C stops cleanly and leaves nothing behind.
 #include "bench_util.h"
 #include "commands.h"
 #include "frame_views.h"
 #include "ar_session.h"
+#include "shards.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
@@ -28,7 +30,7 @@ std::atomic<bool> g_interrupted{false};
 extern "C" void on_sigint(int) { g_interrupted = true; }
 
 struct Options {
-  std::string recording, output;
+  std::string recording, output, frames;
   ArArgs ar;
   int first = 0, last = -1;
   double fps = 30.0;
@@ -39,13 +41,22 @@ void run(const Options& opt) {
   ArSession session(opt.recording, opt.ar, opt.quiet);
   ar::FrameSource& source = session.source();
   const int64_t count = source.frame_count().value_or(0);
-  const int64_t last = opt.last >= 0 ? std::min<int64_t>(opt.last, count - 1) : count - 1;
-  if (opt.first < 0 || opt.first > last) throw std::invalid_argument("frame range " + std::to_string(opt.first) + ".." + std::to_string(last) + " is empty");
-  source.seek(opt.first);
+  int64_t first = opt.first, last = opt.last;
+  if (!opt.frames.empty()) {
+    const FrameRange r = parse_frame_range(opt.frames);
+    first = r.first;
+    last = r.end >= 0 ? r.end - 1 : -1;
+    if (r.end > count) {
+      throw std::invalid_argument("frame range " + opt.frames + ": " + opt.recording + " has " + std::to_string(count) + " frames");
+    }
+  }
+  last = last >= 0 ? std::min<int64_t>(last, count - 1) : count - 1;
+  if (first < 0 || first > last) throw std::invalid_argument("frame range " + std::to_string(first) + ".." + std::to_string(last) + " is empty");
+  source.seek(first);
 
   const std::filesystem::path out(opt.output);
   const std::string ext = out.extension().string();
-  const bool video = ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
+  const bool video = is_video_path(out);
   const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + ext)
                                               : std::filesystem::path(out.string() + ".partial");
   if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
@@ -63,9 +74,10 @@ void run(const Options& opt) {
   copt.shadows = !opt.no_shadows;
   g_interrupted = false;
   auto previous = std::signal(SIGINT, on_sigint);
-  const int64_t total = last - opt.first + 1;
+  const int64_t total = last - first + 1;
   const auto start = std::chrono::steady_clock::now();
   std::vector<double> real_rays;
+  int width = 0, height = 0;
   std::vector<double> frame_ms, read_ms, update_ms, proxy_ms, trace_ms, shadow_ms, occlusion_ms, blend_ms, write_ms;
   try {
     // the next frame is read (decoded) on another thread while this one is composited
@@ -74,7 +86,7 @@ void run(const Options& opt) {
     for (int64_t k = 0; k < total; ++k) {
       if (g_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
       double rm = 0.0;
-      if (!reader.next(f, &rm)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(opt.first + k));
+      if (!reader.next(f, &rm)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(first + k));
       read_ms.push_back(rm);
       const auto t0 = std::chrono::steady_clock::now();
       ar::CompositeStats st;
@@ -92,20 +104,12 @@ void run(const Options& opt) {
       frame_ms.push_back(ms_since(t0));
       const auto tw = std::chrono::steady_clock::now();
       if (video) {
-        if (!writer.isOpened()) {
-          for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
-            if (ext != ".avi" || std::string(cc) == "MJPG") {
-              writer.open(partial.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), opt.fps, img.size());
-              if (writer.isOpened()) break;
-            }
-          }
-          if (!writer.isOpened()) throw std::runtime_error(out.string() + ": OpenCV has no video encoder for " + ext);
-        }
+        if (!writer.isOpened()) open_video_writer(writer, partial, out.string(), opt.fps, img.size());
         writer.write(img);
       } else {
-        char name[32];
-        std::snprintf(name, sizeof(name), "frame_%06lld.png", static_cast<long long>(opt.first + k));
-        if (!cv::imwrite((partial / name).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
+        if (!cv::imwrite(frame_png(partial, first + k).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
+        width = img.cols;
+        height = img.rows;
       }
       write_ms.push_back(ms_since(tw));
       if (!opt.quiet) {
@@ -122,6 +126,15 @@ void run(const Options& opt) {
   }
   std::signal(SIGINT, previous);
   writer.release();
+  if (!video) {
+    // a folder of frames is a shard: it says which frames of which recording it holds, for join
+    try {
+      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.fps});
+    } catch (...) {
+      cleanup();
+      throw;
+    }
+  }
   std::filesystem::remove_all(out);
   std::filesystem::rename(partial, out);
   const double s = ms_since(start) / 1000.0;
@@ -144,6 +157,9 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
   add_ar_options(cmd, opt->ar);
   cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder for numbered PNGs")->required();
+  cmd->add_option("--frames", opt->frames,
+                  "frames A:B (A to B-1; A: to the end): a shard, the same frames as a whole export gives; into a folder, "
+                  "for artrace join");
   cmd->add_option("--first", opt->first, "first frame")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");

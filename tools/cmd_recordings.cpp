@@ -19,6 +19,8 @@
 #include "artrace/io/recording_writer.h"
 #include "artrace/io/synth.h"
 
+#include <opencv2/videoio.hpp>
+
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -125,6 +127,25 @@ nlohmann::json info_recording(const std::filesystem::path& path, const Recording
     j["planes"] = planes_json(f);
   }
   return j;
+}
+
+/// A video clip (export's or join's output): its frames counted by decoding them all.
+nlohmann::json info_video(const std::filesystem::path& path) {
+  cv::VideoCapture clip(path.string());
+  if (!clip.isOpened()) throw std::runtime_error(path.string() + ": OpenCV cannot open it as a video");
+  int frames = 0;
+  cv::Mat f;
+  int width = 0, height = 0;
+  while (clip.read(f)) {
+    if (frames == 0) width = f.cols, height = f.rows;
+    ++frames;
+  }
+  return {{"frames", frames}, {"width", width}, {"height", height}, {"fps", clip.get(cv::CAP_PROP_FPS)},
+          {"codec", [&] {
+             const int cc = static_cast<int>(clip.get(cv::CAP_PROP_FOURCC));
+             return std::string{static_cast<char>(cc & 255), static_cast<char>((cc >> 8) & 255), static_cast<char>((cc >> 16) & 255),
+                                static_cast<char>((cc >> 24) & 255)};
+           }()}};
 }
 
 nlohmann::json info_aff(const std::filesystem::path& path) {
@@ -318,7 +339,7 @@ void add_recording_commands(CLI::App& app) {
     auto rec = std::make_shared<RecordingArgs>();
     auto planes = std::make_shared<bool>(false);
     auto frame = std::make_shared<int>(0);
-    CLI::App* cmd = app.add_subcommand("info", "What a recording, ONI file, AFF scene, glTF model or AR scene holds, or why it cannot be read");
+    CLI::App* cmd = app.add_subcommand("info", "What a recording, ONI file, AFF scene, glTF model, AR scene or video clip holds, or why it cannot be read");
     cmd->add_option("path", *path, "TUM folder, image folder, .oni file, .aff scene, .gltf/.glb model or AR scene .json")->required();
     cmd->add_option("--json", *json, "also write the answer as JSON");
     add_recording_options(cmd, *rec);
@@ -327,7 +348,8 @@ void add_recording_commands(CLI::App& app) {
     cmd->callback([path, json, rec, planes, frame] {
       const std::filesystem::path p(*path);
       const std::string ext = p.extension().string();
-      const nlohmann::json j = ext == ".aff"                      ? info_aff(p)
+      const nlohmann::json j = ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov" ? info_video(p)
+                               : ext == ".aff"                    ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
                                : ext == ".json"                  ? info_ar_scene(p)
                                                                  : info_recording(p, *rec, *planes ? *frame : -1);

@@ -21,6 +21,8 @@ void add_export_command(CLI::App& app);
 void add_replay_command(CLI::App& app);
 void add_bench_bart_command(CLI::App& app);
 void add_bench_ar_command(CLI::App& app);
+void add_join_command(CLI::App& app);
+void add_batch_command(CLI::App& app);
 
 /// A number that is finite and within [lo, hi]. CLI::Range lets NaN through (NaN fails no
 /// comparison), and "nan" or "inf" parse as numbers.

@@ -1,0 +1,182 @@
+// Sharded export, join and batch, run as a user runs them.
+#include "../cli_util.h"
+
+#include <opencv2/videoio.hpp>
+
+#include <fstream>
+#include <iterator>
+
+namespace artrace::io {
+namespace {
+
+const std::string kRoom = (kRoot / "data/recordings/room").string();
+const std::string kDemo = (kRoot / "data/ar/demo.json").string();
+
+std::string bin() { return std::string(ARTRACE_BINARY); }
+
+/// The bytes of every frame_*.png of a folder, in frame order (shard.json left out).
+std::vector<std::vector<char>> pngs(const std::filesystem::path& folder) {
+  std::vector<std::filesystem::path> files;
+  for (const auto& e : std::filesystem::directory_iterator(folder)) {
+    if (e.path().extension() == ".png") files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  std::vector<std::vector<char>> out;
+  for (const auto& f : files) {
+    std::ifstream in(f, std::ios::binary);
+    out.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  return out;
+}
+
+/// Runs a command; returns its exit status and what it printed (stdout and stderr).
+int run_capture(const std::string& cmd, std::string& output, const std::filesystem::path& dir) {
+  const auto log = dir / "command.log";
+  const int status = run(cmd + " > " + log.string() + " 2>&1");
+  std::ifstream in(log);
+  output.assign((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return status;
+}
+
+/// A folder for a test, empty.
+std::filesystem::path fresh(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+std::string export_cmd(const std::filesystem::path& out, const std::string& frames = "") {
+  return bin() + " export " + kRoom + " --scene " + kDemo + " -o " + out.string() + " -q" +
+         (frames.empty() ? "" : " --frames " + frames);
+}
+
+/// No file or folder under the name, nor a .partial one beside it.
+void expect_nothing_written(const std::filesystem::path& out) {
+  EXPECT_FALSE(std::filesystem::exists(out)) << out;
+  for (const auto& e : std::filesystem::directory_iterator(out.parent_path())) {
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << "left behind: " << e.path();
+  }
+}
+
+TEST(Shards, ShardsJoinedAreTheWholeExportBitForBit) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_whole");
+  ASSERT_EQ(run(export_cmd(dir / "whole") + " > /dev/null"), 0);
+  const auto whole = pngs(dir / "whole");
+  ASSERT_EQ(whole.size(), 30u) << "the bundled recording has 30 frames";
+  // three shards, exported out of order, each from a fresh process
+  for (const std::string r : {"20:30", "0:11", "11:20"}) {
+    ASSERT_EQ(run(export_cmd(dir / ("shard_" + r.substr(0, r.find(':'))), r) + " > /dev/null"), 0) << r;
+  }
+  const std::string shards = (dir / "shard_0").string() + " " + (dir / "shard_20").string() + " " + (dir / "shard_11").string();
+  ASSERT_EQ(run(bin() + " join " + shards + " -o " + (dir / "joined").string() + " -q > /dev/null"), 0);
+  const auto joined = pngs(dir / "joined");
+  ASSERT_EQ(joined.size(), whole.size());
+  for (size_t k = 0; k < whole.size(); ++k) EXPECT_TRUE(joined[k] == whole[k]) << "frame " << k;
+  // and encoded once into a clip with every frame
+  ASSERT_EQ(run(bin() + " join " + shards + " -o " + (dir / "clip.mp4").string() + " -q > /dev/null"), 0);
+  cv::VideoCapture clip((dir / "clip.mp4").string());
+  ASSERT_TRUE(clip.isOpened());
+  int frames = 0;
+  for (cv::Mat f; clip.read(f);) ++frames;
+  EXPECT_EQ(frames, 30);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Shards, JoinRefusesAMissingShardNamingTheFrames) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_missing");
+  ASSERT_EQ(run(export_cmd(dir / "a", "0:10") + " > /dev/null"), 0);
+  ASSERT_EQ(run(export_cmd(dir / "c", "20:30") + " > /dev/null"), 0);
+  std::string out;
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / "c").string() + " -o " + (dir / "clip.mp4").string(), out, dir), 1);
+  EXPECT_NE(out.find("frames 10-19 are missing"), std::string::npos) << out;
+  expect_nothing_written(dir / "clip.mp4");
+  // a shard's tail missing too: the range asked for is the whole recording
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " -o " + (dir / "frames").string(), out, dir), 1);
+  EXPECT_NE(out.find("frames 10-29 are missing"), std::string::npos) << out;
+  expect_nothing_written(dir / "frames");
+  // unless the range is given
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " --frames 0:10 -o " + (dir / "frames").string(), out, dir), 0) << out;
+  EXPECT_EQ(pngs(dir / "frames").size(), 10u);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Shards, JoinRefusesOverlappingShards) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_overlap");
+  ASSERT_EQ(run(export_cmd(dir / "a", "0:12") + " > /dev/null"), 0);
+  ASSERT_EQ(run(export_cmd(dir / "b", "10:30") + " > /dev/null"), 0);
+  std::string out;
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / "b").string() + " -o " + (dir / "clip.mp4").string(), out, dir), 1);
+  EXPECT_NE(out.find("frames 10-11 are in both"), std::string::npos) << out;
+  expect_nothing_written(dir / "clip.mp4");
+  std::filesystem::remove_all(dir);
+}
+
+/// A join that fails part-way (a shard's frame unreadable) leaves nothing; so does a shard that
+/// never finished (a .partial folder without shard.json), which is refused by name.
+TEST(Shards, InterruptedJoinAndUnfinishedShardLeaveNothing) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_broken");
+  ASSERT_EQ(run(export_cmd(dir / "a", "0:15") + " > /dev/null"), 0);
+  ASSERT_EQ(run(export_cmd(dir / "b", "15:30") + " > /dev/null"), 0);
+  std::ofstream(dir / "b" / "frame_000020.png", std::ios::trunc) << "not a PNG";
+  std::string out;
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / "b").string() + " -o " + (dir / "clip.mp4").string(), out, dir), 1);
+  EXPECT_NE(out.find("frame_000020.png"), std::string::npos) << out;
+  expect_nothing_written(dir / "clip.mp4");
+  std::filesystem::remove(dir / "b" / "shard.json");  // as an export stopped before the end leaves it
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / "b").string() + " -o " + (dir / "frames").string(), out, dir), 1);
+  EXPECT_NE(out.find("not a complete shard"), std::string::npos) << out;
+  expect_nothing_written(dir / "frames");
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Shards, FrameRangesAreCheckedByName) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_ranges");
+  std::string out;
+  EXPECT_EQ(run_capture(export_cmd(dir / "x", "5:3"), out, dir), 1);
+  EXPECT_NE(out.find("\"5:3\" is empty"), std::string::npos) << out;
+  EXPECT_EQ(run_capture(export_cmd(dir / "x", "a:3"), out, dir), 1);
+  EXPECT_NE(out.find("\"a\" is not a frame number"), std::string::npos) << out;
+  EXPECT_EQ(run_capture(export_cmd(dir / "x", "0:31"), out, dir), 1);
+  EXPECT_NE(out.find("has 30 frames"), std::string::npos) << out;
+  expect_nothing_written(dir / "x");
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Batch, ManifestJobsRunSideBySideAndJoin) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_batch");
+  std::ofstream(dir / "jobs.json") << R"({"jobs": [
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "out/a", "frames": "0:6"},
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "out/b", "frames": "6:12"},
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "out/c.mp4", "frames": "0:4", "args": ["--no-shadows"]}]})";
+  std::string out;
+  ASSERT_EQ(run_capture(bin() + " batch " + (dir / "jobs.json").string() + " --parallel 2", out, dir), 0) << out;
+  EXPECT_NE(out.find("3 done, 0 skipped, 0 failed"), std::string::npos) << out;
+  ASSERT_EQ(run(export_cmd(dir / "whole", "0:12") + " > /dev/null"), 0);
+  ASSERT_EQ(run(bin() + " join " + (dir / "out/a").string() + " " + (dir / "out/b").string() + " --frames 0:12 -o " +
+                (dir / "joined").string() + " -q > /dev/null"),
+            0);
+  EXPECT_TRUE(pngs(dir / "joined") == pngs(dir / "whole"));
+  EXPECT_TRUE(std::filesystem::exists(dir / "out/c.mp4"));
+  // one entry, as an array task runs it; a done one is skipped
+  ASSERT_EQ(run_capture(bin() + " batch " + (dir / "jobs.json").string() + " --index 1 --skip-done", out, dir), 0) << out;
+  EXPECT_NE(out.find("job 1 already done"), std::string::npos) << out;
+  // a job that fails is named, and the batch fails
+  std::ofstream(dir / "bad.json") << R"({"jobs": [{"recording": "nowhere", "scene": ")" << kDemo << R"(", "output": "x.mp4"}]})";
+  EXPECT_EQ(run_capture(bin() + " batch " + (dir / "bad.json").string(), out, dir), 1);
+  EXPECT_NE(out.find("jobs 0 failed"), std::string::npos) << out;
+  // a manifest error names the file, the entry and the key
+  std::ofstream(dir / "typo.json") << R"({"jobs": [{"recording": "r", "scene": "s", "output": "o", "frame": "0:3"}]})";
+  EXPECT_EQ(run_capture(bin() + " batch " + (dir / "typo.json").string(), out, dir), 1);
+  EXPECT_NE(out.find("typo.json: jobs[0]: unknown key \"frame\""), std::string::npos) << out;
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace artrace::io

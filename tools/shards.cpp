@@ -1,0 +1,133 @@
+#include "shards.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <stdexcept>
+
+namespace artrace::tools {
+namespace {
+
+int64_t parse_index(const std::string& text, const std::string& whole) {
+  size_t used = 0;
+  long long v = 0;
+  try {
+    v = std::stoll(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != text.size() || v < 0) {
+    throw std::invalid_argument("frame range \"" + whole + "\": \"" + text + "\" is not a frame number (expected A:B, A: or :B)");
+  }
+  return v;
+}
+
+std::string span(int64_t a, int64_t b) {  // frames [a, b) in words
+  return b - a == 1 ? "frame " + std::to_string(a) : "frames " + std::to_string(a) + "-" + std::to_string(b - 1);
+}
+
+}  // namespace
+
+FrameRange parse_frame_range(const std::string& text) {
+  const size_t colon = text.find(':');
+  if (colon == std::string::npos || text.find(':', colon + 1) != std::string::npos) {
+    throw std::invalid_argument("frame range \"" + text + "\": expected A:B (frames A to B-1), A: or :B");
+  }
+  FrameRange r;
+  const std::string a = text.substr(0, colon), b = text.substr(colon + 1);
+  if (!a.empty()) r.first = parse_index(a, text);
+  if (!b.empty()) r.end = parse_index(b, text);
+  if (r.end >= 0 && r.end <= r.first) throw std::invalid_argument("frame range \"" + text + "\" is empty");
+  return r;
+}
+
+std::filesystem::path frame_png(const std::filesystem::path& folder, int64_t index) {
+  char name[40];
+  std::snprintf(name, sizeof(name), "frame_%06lld.png", static_cast<long long>(index));
+  return folder / name;
+}
+
+void write_shard_info(const ShardInfo& s) {
+  const nlohmann::json j = {{"recording", s.recording}, {"first", s.first},   {"end", s.end},
+                            {"recording_frames", s.recording_frames},       {"width", s.width},
+                            {"height", s.height},       {"fps", s.fps}};
+  std::ofstream f(s.folder / kShardManifest);
+  f << j.dump(2) << "\n";
+  if (!f) throw std::runtime_error((s.folder / kShardManifest).string() + ": cannot write");
+}
+
+ShardInfo read_shard_info(const std::filesystem::path& folder) {
+  const std::filesystem::path file = folder / kShardManifest;
+  if (!std::filesystem::is_directory(folder)) throw std::runtime_error(folder.string() + ": not a folder of an export's frames");
+  std::ifstream in(file);
+  if (!in) {
+    throw std::runtime_error(folder.string() + ": not a complete shard (no " + kShardManifest +
+                             "; an export of it that did not finish leaves only a .partial folder)");
+  }
+  ShardInfo s;
+  s.folder = folder;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(in);
+    s.recording = j.at("recording").get<std::string>();
+    s.first = j.at("first").get<int64_t>();
+    s.end = j.at("end").get<int64_t>();
+    s.recording_frames = j.at("recording_frames").get<int64_t>();
+    s.width = j.at("width").get<int>();
+    s.height = j.at("height").get<int>();
+    s.fps = j.at("fps").get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::runtime_error(file.string() + ": " + e.what());
+  }
+  if (s.first < 0 || s.end <= s.first || s.recording_frames < s.end || s.width <= 0 || s.height <= 0 || !(s.fps > 0.0)) {
+    throw std::runtime_error(file.string() + ": inconsistent values (frames " + std::to_string(s.first) + ".." +
+                             std::to_string(s.end) + " of " + std::to_string(s.recording_frames) + ", " +
+                             std::to_string(s.width) + "x" + std::to_string(s.height) + ")");
+  }
+  return s;
+}
+
+std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end) {
+  std::vector<std::string> out;
+  std::sort(shards.begin(), shards.end(), [](const ShardInfo& a, const ShardInfo& b) {
+    return a.first != b.first ? a.first < b.first : a.end < b.end;
+  });
+  int64_t covered = first;  // frames [first, covered) are in some shard
+  const ShardInfo* last = nullptr;
+  for (const ShardInfo& s : shards) {
+    if (s.end <= first || s.first >= end) {
+      out.push_back(s.folder.string() + " holds " + span(s.first, s.end) + ", outside " + span(first, end));
+      continue;
+    }
+    if (s.first > covered) out.push_back(span(covered, s.first) + (s.first - covered == 1 ? " is missing" : " are missing"));
+    if (last && s.first < covered) {
+      const int64_t e = std::min(covered, s.end);
+      out.push_back(span(s.first, e) + (e - s.first == 1 ? " is" : " are") + " in both " + last->folder.string() + " and " +
+                    s.folder.string());
+    }
+    if (s.end > covered) {
+      covered = s.end;
+      last = &s;
+    }
+  }
+  if (covered < end) out.push_back(span(covered, end) + (end - covered == 1 ? " is missing" : " are missing"));
+  return out;
+}
+
+void open_video_writer(cv::VideoWriter& writer, const std::filesystem::path& file, const std::string& shown_name, double fps,
+                       cv::Size size) {
+  const std::string ext = file.extension().string();
+  for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
+    if (ext != ".avi" || std::string(cc) == "MJPG") {
+      writer.open(file.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), fps, size);
+      if (writer.isOpened()) return;
+    }
+  }
+  throw std::runtime_error(shown_name + ": OpenCV has no video encoder for " + ext);
+}
+
+bool is_video_path(const std::filesystem::path& p) {
+  const std::string ext = p.extension().string();
+  return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
+}
+
+}  // namespace artrace::tools

@@ -1,0 +1,59 @@
+// Shards of an export: a frame range rendered on its own into a folder of PNGs with a
+// shard.json that says which range of which recording it holds. `artrace join` checks that a set
+// of shards covers a range exactly once and encodes it in one go.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace artrace::tools {
+
+/// A half-open frame range [first, end); end = -1: to the end of the recording.
+struct FrameRange {
+  int64_t first = 0, end = -1;
+};
+
+/// "A:B" (frames A to B - 1), "A:" (A to the end) or ":B". Throws std::invalid_argument naming
+/// the text when it is anything else or empty (B <= A).
+FrameRange parse_frame_range(const std::string& text);
+
+/// What a complete shard folder holds, from its shard.json.
+struct ShardInfo {
+  std::filesystem::path folder;
+  std::string recording;
+  int64_t first = 0, end = 0;  ///< frames [first, end), one PNG each: frame_%06d.png
+  int64_t recording_frames = 0;
+  int width = 0, height = 0;
+  double fps = 30.0;
+};
+
+constexpr const char* kShardManifest = "shard.json";
+
+/// The PNG of frame `index` in a shard or frame folder.
+std::filesystem::path frame_png(const std::filesystem::path& folder, int64_t index);
+
+/// Writes `folder`/shard.json (the folder being a finished shard's contents, before it is
+/// renamed into place).
+void write_shard_info(const ShardInfo& s);
+/// Reads a shard folder's shard.json; throws naming the folder when it is not a complete shard
+/// (no shard.json: an export that did not finish, or another folder) or the file is malformed.
+ShardInfo read_shard_info(const std::filesystem::path& folder);
+
+/// Problems with covering [first, end) by these shards exactly once, in words ("frames 40-59 are
+/// missing", "frames 20-29 are in both a/ and b/"); empty when they tile it.
+std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end);
+
+/// Opens `writer` on `file` for frames of `size` at `fps`: H.264 where OpenCV's FFmpeg has it,
+/// MPEG-4 otherwise, Motion JPEG for .avi. Throws naming `shown_name` when no encoder opens.
+void open_video_writer(cv::VideoWriter& writer, const std::filesystem::path& file, const std::string& shown_name, double fps,
+                       cv::Size size);
+/// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov).
+bool is_video_path(const std::filesystem::path& p);
+
+}  // namespace artrace::tools
