@@ -112,13 +112,11 @@ std::optional<Plane> fit_plane(const std::vector<Eigen::Vector3d>& pts, const Ra
   return best;
 }
 
-std::optional<Plane> plane_at_pixel(const SensorFrame& f, int u, int v, int r) {
+namespace {
+
+/// plane_at_pixel with one window radius.
+std::optional<Plane> plane_in_window(const SensorFrame& f, int u, int v, int r) {
   const DepthImage& d = f.depth;
-  if (u < 0 || v < 0 || u >= d.width || v >= d.height) return std::nullopt;
-  // the window: `r` pixels, or 25 cm around the point seen (more baseline for the normal far
-  // away), sampled to about 25 x 25 depths
-  const float z0 = d.at(u, v);
-  if (r <= 0) r = DepthImage::valid(z0) ? std::clamp(static_cast<int>(0.25 * f.color_intrinsics.fx / z0), 8, 64) : 12;
   const int stride = std::max(1, r / 12);
   std::vector<Eigen::Vector3d> pts;
   double zsum = 0.0;
@@ -155,6 +153,23 @@ std::optional<Plane> plane_at_pixel(const SensorFrame& f, int u, int v, int r) {
   p->pixel_u = u;
   p->pixel_v = v;
   return p;
+}
+
+}  // namespace
+
+std::optional<Plane> plane_at_pixel(const SensorFrame& f, int u, int v, int r) {
+  const DepthImage& d = f.depth;
+  if (u < 0 || v < 0 || u >= d.width || v >= d.height) return std::nullopt;
+  if (r > 0) return plane_in_window(f, u, v, r);
+  // the window: 25 cm around the point seen (more baseline for the normal far away), sampled to
+  // about 25 x 25 depths; where other surfaces crowd it (a shelf, a narrow desk between objects),
+  // half and a quarter of that, down to 8 pixels
+  const float z0 = d.at(u, v);
+  const int r0 = DepthImage::valid(z0) ? std::clamp(static_cast<int>(0.25 * f.color_intrinsics.fx / z0), 8, 64) : 12;
+  for (int w = r0;; w /= 2) {
+    if (std::optional<Plane> p = plane_in_window(f, u, v, std::max(w, 8))) return p;
+    if (w <= 8) return std::nullopt;
+  }
 }
 
 std::vector<Plane> detect_planes(const SensorFrame& f, const PlaneDetection& o) {

@@ -44,6 +44,17 @@ void from_row_major(CameraFile& c, const std::vector<double>& m, const std::stri
   c.intrinsics.cy = m[5];
 }
 
+/// An image width or height as a file gives it: a whole number in 0..100000 (checked before the
+/// conversion, which is undefined for values beyond int).
+int image_size(const std::filesystem::path& path, const char* key, double v) {
+  if (!(v >= 0.0 && v <= 100000.0) || v != std::floor(v)) {
+    std::ostringstream m;
+    m << key << " " << v << " is not a whole number in 0..100000";
+    throw ParseError(path.string(), 0, 0, m.str());
+  }
+  return static_cast<int>(v);
+}
+
 CameraFile read_json(const std::filesystem::path& path) {
   CameraFile c;
   c.file = path;
@@ -61,8 +72,8 @@ CameraFile read_json(const std::filesystem::path& path) {
   std::vector<double> m;
   try {
     m = j.at("intrinsic_matrix").get<std::vector<double>>();
-    if (j.contains("width")) c.intrinsics.width = j.at("width").get<int>();
-    if (j.contains("height")) c.intrinsics.height = j.at("height").get<int>();
+    if (j.contains("width")) c.intrinsics.width = image_size(path, "width", j.at("width").get<double>());
+    if (j.contains("height")) c.intrinsics.height = image_size(path, "height", j.at("height").get<double>());
   } catch (const nlohmann::json::exception& e) {
     throw ParseError(path.string(), 0, 0, std::string("intrinsic_matrix, width and height must be numbers: ") + e.what());
   }
@@ -116,8 +127,8 @@ CameraFile read_yaml(const std::filesystem::path& path) {
     }
     for (const auto& [wk, hk] : {std::pair{"image_width", "image_height"}, std::pair{"width", "height"}}) {
       if (!fs[wk].empty() && !fs[hk].empty()) {
-        c.intrinsics.width = static_cast<int>(fs[wk].real());
-        c.intrinsics.height = static_cast<int>(fs[hk].real());
+        c.intrinsics.width = image_size(path, wk, fs[wk].real());
+        c.intrinsics.height = image_size(path, hk, fs[hk].real());
         break;
       }
     }

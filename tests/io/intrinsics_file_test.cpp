@@ -88,6 +88,12 @@ TEST(CameraFile, BrokenFilesNameTheFileAndTheProblem) {
       {"not_json.json", "{ intrinsic", "not valid JSON"},
       {"no_matrix.yaml", "image_width: 640\n", "has neither camera_matrix nor K"},
       {"huge.yaml", "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [1e9, 0, 1, 0, 1, 1, 0, 0, 1]\n", "fx 1e+09 is not in (0, 1e6]"},
+      // found by fuzz_intrinsics: a width beyond int was converted to int (undefined behaviour)
+      {"huge_width.yaml", "image_width: 1e308\nimage_height: 240\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [285, 0, 160, 0, 285, 120, 0, 0, 1]\n",
+       "image_width 1e+308 is not a whole number in 0..100000"},
+      {"half_height.yaml", "image_width: 320\nimage_height: 239.5\nK: [285, 0, 160, 0, 285, 120, 0, 0, 1]\n", "image_height 239.5 is not a whole number"},
+      {"huge_width.json", R"({ "intrinsic_matrix": [500, 0, 0, 0, 500, 0, 320, 240, 1], "width": 1e300, "height": 480 })",
+       "width 1e+300 is not a whole number in 0..100000"},
   };
   for (const Case& c : cases) {
     const auto p = write_file(c.name, c.text);

@@ -48,10 +48,11 @@ std::optional<Plane> fit_plane(const std::vector<Eigen::Vector3d>& points, const
 double kinect_sigma_m(double z);
 
 /// The plane seen around pixel (u, v) of a frame, from the valid depths within `radius_px` (0: the
-/// pixels within 25 cm of the point seen there, 8 to 64 of them, sampled to about 25 x 25), in the
-/// frame's world coordinates (camera coordinates without a pose), through the surface seen at the
-/// pixel itself. Its `point` is where the pixel's ray meets the plane. Empty where too few depths
-/// or no plane holds half of them.
+/// pixels within 25 cm of the point seen there, 8 to 64 of them, sampled to about 25 x 25; where no
+/// plane holds half of those, half and a quarter of that radius, down to 8 pixels), in the frame's
+/// world coordinates (camera coordinates without a pose), through the surface seen at the pixel
+/// itself. Its `point` is where the pixel's ray meets the plane. Empty where too few depths or no
+/// plane holds half of them.
 std::optional<Plane> plane_at_pixel(const SensorFrame& frame, int u, int v, int radius_px = 0);
 
 struct PlaneDetection {

@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Coverage-guided fuzzing of every reader with libFuzzer (Clang, ASan, UBSan), in process.
+#
+#   scripts/fuzz.sh [SECONDS_EACH] [HARNESS...]      # default 30 s each, every harness
+#   RUNS=10000000 scripts/fuzz.sh 0 aff              # a campaign: a number of executions instead
+#
+# Builds build-fuzz/ (CXX=clang++ -DARTRACE_FUZZ=ON) once, then runs each fuzz_<reader> on a copy
+# of its seed corpus (tests/fuzz/corpus/<reader>, kept in the repository) with its dictionary, and fails
+# on the first crash, leak, sanitizer report or hang (> 10 s on one input). The crashing input is
+# kept as build-fuzz/findings/<reader>/crash-*; make it a regression test, fix, and run again.
+# A summary line per harness (executions, executions/s, coverage) goes to build-fuzz/fuzz-summary.txt.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seconds=${1:-30}
+shift || true
+all=(aff ppm gltf ar_scene tum oni oni_codecs intrinsics)
+harnesses=("$@")
+(( ${#harnesses[@]} )) || harnesses=("${all[@]}")
+command -v clang++ > /dev/null || { echo "fuzz.sh: clang++ is missing (scripts/install-deps.sh installs clang)"; exit 1; }
+if [ ! -f build-fuzz/build.ninja ]; then
+  CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+    -DARTRACE_FUZZ=ON -DARTRACE_BUILD_TESTS=OFF -DARTRACE_BUILD_TOOLS=OFF -DARTRACE_WITH_EMBREE=OFF > /dev/null
+fi
+cmake --build build-fuzz --target fuzzers
+summary=build-fuzz/fuzz-summary.txt
+: > "$summary"
+dict_of() {
+  case $1 in
+    aff) echo tests/fuzz/dict/aff.dict ;;
+    gltf|ar_scene) echo tests/fuzz/dict/json.dict ;;
+    tum) echo tests/fuzz/dict/tum.dict ;;
+    intrinsics) echo tests/fuzz/dict/intrinsics.dict ;;
+  esac
+}
+status=0
+for h in "${harnesses[@]}"; do
+  work=build-fuzz/corpus/$h findings=build-fuzz/findings/$h
+  mkdir -p "$work" "$findings"
+  cp -n tests/fuzz/corpus/"$h"/* "$work"/ 2> /dev/null || true
+  args=(-timeout=10 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 -artifact_prefix="$findings/")
+  d=$(dict_of "$h")
+  [ -n "$d" ] && args+=(-dict="$d")
+  if [ -n "${RUNS:-}" ]; then args+=(-runs="$RUNS"); else args+=(-max_total_time="$seconds"); fi
+  [ -n "${JOBS:-}" ] && args+=(-fork="$JOBS")
+  log=build-fuzz/fuzz_$h.log
+  echo "== fuzz_$h ${RUNS:+($RUNS executions)}${RUNS:-(${seconds} s)}"
+  set +e
+  ./build-fuzz/tests/fuzz/fuzz_"$h" "${args[@]}" "$work" > "$log" 2>&1
+  code=$?
+  set -e
+  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | tail -1 | grep -o '[0-9]*$' || true)
+  rate=$(grep -o 'stat::average_exec_per_sec: *[0-9]*' "$log" | tail -1 | grep -o '[0-9]*$' || true)
+  cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+' "$log" | tail -1 || true)
+  line="fuzz_$h: ${execs:-?} executions, ${rate:-?}/s, ${cov:-cov ?}, corpus $(ls "$work" | wc -l) files"
+  if [ $code -ne 0 ]; then
+    line="$line: FAILED (exit $code), see $log and $findings"
+    grep -E 'ERROR|SUMMARY|runtime error' "$log" | head -5 || true
+    status=1
+  fi
+  echo "$line" | tee -a "$summary"
+done
+exit $status

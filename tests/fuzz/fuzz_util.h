@@ -1,0 +1,56 @@
+// What the libFuzzer harnesses share: a scratch folder of their own (one per process) to write an
+// input into under the name a reader expects, with the files it may refer to beside it.
+//
+// A harness calls one reader on one input. Readers answer bad input by throwing (a message that
+// names the file and what is wrong): that is a pass. A crash, a sanitizer report, a hang (libFuzzer's
+// -timeout) or an exception not derived from std::exception is a finding.
+#pragma once
+
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <string_view>
+
+namespace artrace::fuzz {
+
+/// This process's scratch folder, made once (in /dev/shm where it exists: no disk writes).
+inline const std::filesystem::path& scratch() {
+  static const std::filesystem::path dir = [] {
+    const std::filesystem::path base = std::filesystem::exists("/dev/shm") ? "/dev/shm" : std::filesystem::temp_directory_path();
+    auto d = base / ("artrace-fuzz-" + std::to_string(getpid()));
+    std::filesystem::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+/// Writes bytes to `name` in the scratch folder; returns its path.
+inline std::filesystem::path put(const std::string& name, const uint8_t* data, size_t size) {
+  const auto p = scratch() / name;
+  std::ofstream(p, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
+  return p;
+}
+inline std::filesystem::path put(const std::string& name, std::string_view text) {
+  return put(name, reinterpret_cast<const uint8_t*>(text.data()), text.size());
+}
+
+/// Copies a file of the source tree into the scratch folder (for readers that open references).
+inline void provide(const std::filesystem::path& from_source, const std::string& as) {
+  std::filesystem::copy_file(std::filesystem::path(ARTRACE_SOURCE_DIR) / from_source, scratch() / as,
+                             std::filesystem::copy_options::overwrite_existing);
+}
+
+/// Runs a reader; exceptions derived from std::exception are its clean answers to bad input.
+template <class Fn>
+inline void expect_clean(Fn&& fn) {
+  try {
+    fn();
+  } catch (const std::exception&) {
+  }
+}
+
+}  // namespace artrace::fuzz
