@@ -90,6 +90,44 @@ CATALOGUE = [
      "record_header(kNewData, n->id, 40, static_cast<uint32_t>(n->frame_bytes), n->last_data);",
      "record_header(kNewData, n->id, 40, static_cast<uint32_t>(n->frame_bytes), 0);",
      "the undo chain of data records would be broken"),
+    # ONI 16z/16zT depth decoding
+    ("oni-16z-escape-difference-sign", "io/src/oni_codecs.cpp",
+     "cur = static_cast<uint16_t>(cur + 192 - in[pos]);", "cur = static_cast<uint16_t>(cur - 192 + in[pos]);",
+     "an escaped difference would be applied with the wrong sign"),
+    ("oni-16zt-table-big-endian", "io/src/oni_codecs.cpp",
+     "lut[k] = static_cast<uint16_t>(in[2 + 2 * k] | in[3 + 2 * k] << 8);",
+     "lut[k] = static_cast<uint16_t>(in[3 + 2 * k] | in[2 + 2 * k] << 8);",
+     "16zT table entries would be read big-endian"),
+    # glTF textures
+    ("texture-srgb-ignored", "ar/src/texture.cpp",
+     "  if (srgb_) return {core::srgb8_to_linear(p[0])", "  if (false) return {core::srgb8_to_linear(p[0])",
+     "base-colour textures would be taken as linear, too bright in the mid-tones"),
+    ("texture-mirrored-repeat-as-repeat", "ar/src/texture.cpp",
+     "return m < n ? m : period - 1 - m;", "return m < n ? m : m - n;",
+     "mirrored repeat would repeat without the mirror"),
+    # anchors on real surfaces
+    ("anchor-left-handed-frame", "io/src/ar_scene.cpp",
+     "const Eigen::Vector3d x = y.cross(z);", "const Eigen::Vector3d x = z.cross(y);",
+     "an anchored model would be mirrored"),
+    ("anchor-offset-sign", "io/src/ar_scene.cpp",
+     "const Eigen::Vector3d o = plane->point + y * p.anchor->offset_m;",
+     "const Eigen::Vector3d o = plane->point - y * p.anchor->offset_m;",
+     "anchor.offset would sink the model into the surface"),
+    ("anchor-point-not-on-the-pixel-ray", "ar/src/plane_fit.cpp",
+     "  if (std::fabs(den) > 1e-9) p->point = eye + dir * (p->normal.dot(p->point - eye) / den);\n", "",
+     "an anchored model would stand at the fitted points' centre, not where the pixel's ray meets the plane"),
+    # fusion
+    ("fusion-extrinsic-not-inverted", "io/src/fusion.cpp",
+     "f.world_from_camera->inverse().matrix();  // camera from world", "f.world_from_camera->matrix();  // camera from world",
+     "frames would be fused with the inverse of their poses"),
+    # intrinsics files
+    ("intrinsics-image-size-unchecked", "io/src/intrinsics_file.cpp",
+     "if (!(v >= 0.0 && v <= 100000.0) || v != std::floor(v)) {", "if (false) {",
+     "a width beyond int would be converted to int (undefined behaviour), a fractional one truncated"),
+    # scale-out: shards must tile the frames
+    ("shards-gap-unreported", "tools/shards.cpp",
+     "if (s.first > covered) out.push_back(", "if (false) out.push_back(",
+     "join would encode a clip with frames missing in the middle"),
     # TUM association
     ("tum-pairing-window-one-side", "io/src/tum_reader.cpp",
      "while (lo < depth.size() && depth[lo].time_s < color[c].time_s - max_dt_s) ++lo;",
@@ -97,9 +135,8 @@ CATALOGUE = [
      "depth frames up to three windows before a colour frame would be paired with it"),
     # thread-count determinism of the compositor
     ("compositor-shadow-smoothing-in-place", "ar/src/compositor.cpp",
-     "  smooth = factor;\n  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {",
-     "  smooth = factor;\n  core::for_each_tile(w, h, opt.threads, [&](const core::Tile& tl) { for (int y = std::max(1, tl.y0); y < std::min(h - 1, tl.y1); ++y) { for (int x = std::max(1, tl.x0); x < std::min(w - 1, tl.x1); ++x) { const size_t i = static_cast<size_t>(y) * w + x; if (factor[i] != glm::vec3(1.0f)) factor[i] = 0.5f * (factor[i] + factor[i + 1]); } } });\n  for (int y = std::max(1, rect.y0); y < std::min(h - 1, rect.y1); ++y) {",
-     "smoothing in place across tiles makes the shadows depend on how tiles are spread over threads"),
+     "    smooth[k] = sum / static_cast<float>(n);", "    smooth[k] = factor[i] = sum / static_cast<float>(n);",
+     "smoothing in place makes the shadows depend on the order in which threads listed the pixels"),
 ]
 
 

@@ -1,4 +1,5 @@
 #include "artrace/core/bvh.h"
+#include "fork_join.h"
 #include "kernels.h"
 
 #include <tbb/task_group.h>
@@ -161,10 +162,13 @@ void Bvh::build_subtree(uint32_t index) const {
   if (n.split == 0) return;
   const uint32_t l = 2 * n.split, r = l + 1;
   if (n.end - n.begin >= kParallelThreshold) {
+    detail::ForkJoin fj;
     tbb::task_group tasks;
-    tasks.run([&] { build_subtree(l); });
+    const auto left = [&] { build_subtree(l); };
+    tasks.run(fj.task(left));
     build_subtree(r);
     tasks.wait();
+    fj.joined();
   } else {
     build_subtree(l);
     build_subtree(r);

@@ -1,5 +1,6 @@
 // SAH kd-tree construction in O(N log N) after Wald & Havran 2006 (see kd_tree.h).
 #include "artrace/core/kd_tree.h"
+#include "fork_join.h"
 #include "kernels.h"
 
 #include <glm/gtc/type_ptr.hpp>
@@ -116,7 +117,10 @@ struct Subtree {
 /// thread count.
 template <class F>
 void for_chunks(size_t n, size_t chunks, const F& f) {
-  tbb::parallel_for(size_t{0}, chunks, [&](size_t c) { f(n * c / chunks, n * (c + 1) / chunks, c); });
+  detail::ForkJoin fj;
+  const auto body = [&](size_t c) { f(n * c / chunks, n * (c + 1) / chunks, c); };
+  tbb::parallel_for(size_t{0}, chunks, fj.task(body));
+  fj.joined();
 }
 
 /// Sorts events made in triangle order by (position, type), triangles in order among equals:
@@ -328,7 +332,12 @@ class Builder {
     RefList().swap(refs);
     // Radix sorts keep triangle order among equal keys: the order of operator<.
     if (n >= opt_.parallel_threshold) {
-      tbb::parallel_invoke([&] { radix_sort<11>(ev[0]); }, [&] { radix_sort<11>(ev[1]); }, [&] { radix_sort<11>(ev[2]); });
+      detail::ForkJoin fj;
+      const auto x = [&] { radix_sort<11>(ev[0]); };
+      const auto y = [&] { radix_sort<11>(ev[1]); };
+      const auto z = [&] { radix_sort<11>(ev[2]); };
+      tbb::parallel_invoke(fj.task(x), fj.task(y), fj.task(z));
+      fj.joined();
     } else {
       for (auto& list : ev) radix_sort<8>(list);
     }
@@ -411,10 +420,13 @@ class Builder {
       auto sub_left = std::make_unique<Subtree>(), sub_right = std::make_unique<Subtree>();
       sub_left->nodes.resize(1);
       sub_right->nodes.resize(1);
+      detail::ForkJoin fj;
       tbb::task_group tasks;
-      tasks.run([&] { build_left(*sub_left, 0); });
+      const auto left = [&] { build_left(*sub_left, 0); };
+      tasks.run(fj.task(left));
       build_right(*sub_right, 0);
       tasks.wait();
+      fj.joined();
       const uint32_t child = add_inner(out, index, split);
       out.pending.push_back({child, std::move(sub_left)});
       out.pending.push_back({child + 1, std::move(sub_right)});
@@ -960,11 +972,14 @@ void flatten(const Subtree& root, std::vector<KdNode>& nodes, std::vector<uint32
     return n.is_leaf() ? KdNode::make_leaf(n.prim_offset + pl.prim_base, n.prim_count())
                        : KdNode::make_inner(n.axis(), n.split, n.left_child() + pl.base);
   };
-  tbb::parallel_for(size_t{0}, placements.size(), [&](size_t i) {
+  detail::ForkJoin fj;
+  const auto copy = [&](size_t i) {
     const Placement& pl = placements[i];
     for (size_t j = 1; j < pl.sub->nodes.size(); ++j) nodes[pl.base + j] = relocate(pl, pl.sub->nodes[j]);
     std::copy(pl.sub->prims.begin(), pl.sub->prims.end(), prims.begin() + pl.prim_base);
-  });
+  };
+  tbb::parallel_for(size_t{0}, placements.size(), fj.task(copy));
+  fj.joined();
   // The roots last: a subtree's slot is a placeholder among its parent's nodes.
   for (const Placement& pl : placements) nodes[pl.slot] = relocate(pl, pl.sub->nodes[0]);
 }

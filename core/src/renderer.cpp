@@ -1,5 +1,7 @@
 #include "artrace/core/renderer.h"
 
+#include "fork_join.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
@@ -20,9 +22,11 @@ void for_each_tile(int width, int height, int threads, const std::function<void(
     }
   };
   tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+  detail::ForkJoin fj;
   arena.execute([&] {
-    tbb::parallel_for(tbb::blocked_range<int>(0, count, 1), body, tbb::simple_partitioner());
+    tbb::parallel_for(tbb::blocked_range<int>(0, count, 1), fj.task(body), tbb::simple_partitioner());
   });
+  fj.joined();
 }
 
 LaneMask primary_packet(const Camera& cam, int x, int y, RayPacket& rays, int rows) {

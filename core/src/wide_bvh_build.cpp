@@ -1,5 +1,6 @@
 // Build of the 8-wide BVH (see wide_bvh.h): binned SAH, binary splits gathered into wide nodes.
 #include "artrace/core/wide_bvh.h"
+#include "fork_join.h"
 #include "kernels.h"
 
 #include <tbb/parallel_for.h>
@@ -229,7 +230,10 @@ class Builder {
     std::vector<Sub> subs(big.size());
     std::vector<uint32_t> sub_root(big.size());
     if (!big.empty()) {
-      tbb::parallel_for(size_t{0}, big.size(), [&](size_t k) { sub_root[k] = subtree(child[big[k]], subs[k], depth + 1); });
+      detail::ForkJoin fj;
+      const auto build = [&](size_t k) { sub_root[k] = subtree(child[big[k]], subs[k], depth + 1); };
+      tbb::parallel_for(size_t{0}, big.size(), fj.task(build));
+      fj.joined();
     }
     size_t next_big = 0;
     for (size_t c = 0; c < child.size(); ++c) {

@@ -1,9 +1,8 @@
 #include "artrace/core/bvh.h"
 #include "artrace/core/simd_level.h"
+#include "artrace/core/renderer.h"
 #include "../test_util.h"
 
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 namespace artrace::core {
 namespace {
@@ -56,12 +55,16 @@ TEST(Bvh, LazyBuildIsDeterministicAcrossThreads) {
   const Bvh one(tris), two(tris);
   std::vector<Hit> a(rays.size()), b(rays.size());
   for (size_t i = 0; i < rays.size(); ++i) a[i] = one.intersect(rays[i]);
-  tbb::task_arena arena(4);
-  arena.execute([&] {
-    tbb::parallel_for(size_t(0), rays.size(), [&](size_t k) {
-      const size_t i = rays.size() - 1 - k;  // reverse order as well
-      b[i] = two.intersect(rays[i]);
-    });
+  // 4 threads over a 200 x 100 grid of tiles, one ray a pixel, in reverse order as well (the
+  // renderer's own parallel loop, whose hand-over ThreadSanitizer builds can see)
+  ASSERT_EQ(rays.size(), 200u * 100u);
+  for_each_tile(200, 100, 4, [&](const Tile& t) {
+    for (int y = t.y0; y < t.y1; ++y) {
+      for (int x = t.x0; x < t.x1; ++x) {
+        const size_t i = rays.size() - 1 - (static_cast<size_t>(y) * 200 + x);
+        b[i] = two.intersect(rays[i]);
+      }
+    }
   });
   for (size_t i = 0; i < rays.size(); ++i) {
     ASSERT_EQ(a[i].prim, b[i].prim) << i;
