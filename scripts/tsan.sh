@@ -11,7 +11,7 @@
 # not instrumented; .ci/tsan.supp lists what is suppressed and why.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-filter=${1:-'Renderer.*:Whitted.*:Compositor.*:ArRuntime.*:KdTree.BuildIsIdenticalForAnyThreadCount:WideBvh.BuildIsIdenticalForAnyThreadCount:WideBvh.SameHitsAsTheKdTree:Bvh.LazyBuildIsDeterministicAcrossThreads:Bvh.LazyAndFullMatchBruteForce:TwoLevelScene.PacketsEqualSingleRays:TwoLevelScene.ScrambledDeformingMeshStaysCorrect:Export.SameFramesForAnyThreadCount:Export.StoppedExportLeavesNoFile:Export.RealOniRecordingThroughTheArPath:RealScene.AnchorsSitOnTheFloorAndTheTable'}
+filter=${1:-'Renderer.*:Whitted.*:Compositor.*:ArRuntime.*:KdTree.BuildIsIdenticalForAnyThreadCount:WideBvh.BuildIsIdenticalForAnyThreadCount:WideBvh.SameHitsAsTheKdTree:Bvh.LazyBuildIsDeterministicAcrossThreads:Bvh.LazyAndFullMatchBruteForce:TwoLevelScene.PacketsEqualSingleRays:TwoLevelScene.ScrambledDeformingMeshStaysCorrect:Export.SameFramesForAnyThreadCount:Export.StoppedExportLeavesNoFile:Export.RealOniRecordingThroughTheArPath:RealScene.AnchorsSitOnTheFloorAndTheTable:FrameReader.*'}
 if [ ! -f build-tsan/build.ninja ]; then
   cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g -DNDEBUG" \
     -DARTRACE_SANITIZE=thread -DARTRACE_BUILD_TOOLS=OFF -DARTRACE_WITH_EMBREE=OFF > /dev/null

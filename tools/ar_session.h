@@ -5,13 +5,13 @@
 
 #include "bench_util.h"
 #include "commands.h"
+#include "frame_reader.h"
 #include "recording_options.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
 #include "artrace/io/fusion.h"
 
-#include <future>
 #include <memory>
 #include <string>
 
@@ -78,49 +78,6 @@ class ArSession {
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
   ar::CompositeOptions options_;
-};
-
-/// Reads a recording one frame ahead on a thread of its own: next() hands over the frame read
-/// while the caller worked on the previous one, and starts reading the following one.
-class FrameReader {
- public:
-  explicit FrameReader(ar::FrameSource& source) : source_(source) {}
-  ~FrameReader() { wait(); }
-
-  /// The next frame; false at the end. `read_ms`: how long its reading took (on the other thread).
-  bool next(ar::SensorFrame& frame, double* read_ms = nullptr) {
-    if (!pending_.valid()) start();
-    const bool ok = pending_.get();
-    if (read_ms) *read_ms = last_read_ms_;
-    if (!ok) return false;
-    std::swap(frame, ahead_);
-    start();
-    return true;
-  }
-  /// Positions the source (after any read in flight) so that next() returns frame `index`.
-  void seek(int64_t index) {
-    wait();
-    source_.seek(index);
-  }
-
- private:
-  void start() {
-    pending_ = std::async(std::launch::async, [this] {
-      const auto t0 = std::chrono::steady_clock::now();
-      const bool ok = source_.next(ahead_);
-      last_read_ms_ = ms_since(t0);
-      return ok;
-    });
-  }
-  void wait() {
-    if (pending_.valid()) pending_.wait();
-    pending_ = std::future<bool>();
-  }
-
-  ar::FrameSource& source_;
-  ar::SensorFrame ahead_;
-  std::future<bool> pending_;
-  double last_read_ms_ = 0.0;
 };
 
 }  // namespace artrace::tools

@@ -17,7 +17,6 @@
 #include <opencv2/videoio.hpp>
 
 #include <atomic>
-#include <future>
 #include <csignal>
 #include <cstdio>
 #include <memory>
