@@ -3,6 +3,7 @@
 #
 #   scripts/fuzz.sh [SECONDS_EACH] [HARNESS...]      # default 30 s each, every harness
 #   RUNS=10000000 scripts/fuzz.sh 0 aff              # a campaign: a number of executions instead
+#   LANES=2 scripts/fuzz.sh 30                       # two harnesses at a time (one core each)
 #
 # Builds build-fuzz/ (CXX=clang++ -DARTRACE_FUZZ=ON) once, then runs each fuzz_<reader> on a copy
 # of its seed corpus (tests/fuzz/corpus/<reader>, kept in the repository) with its dictionary, and fails
@@ -32,8 +33,8 @@ dict_of() {
     intrinsics) echo tests/fuzz/dict/intrinsics.dict ;;
   esac
 }
-status=0
-for h in "${harnesses[@]}"; do
+fuzz_one() {
+  local h=$1 work findings args d log code execs rate cov line
   work=build-fuzz/corpus/$h findings=build-fuzz/findings/$h
   mkdir -p "$work" "$findings"
   cp -n tests/fuzz/corpus/"$h"/* "$work"/ 2> /dev/null || true
@@ -55,8 +56,19 @@ for h in "${harnesses[@]}"; do
   if [ $code -ne 0 ]; then
     line="$line: FAILED (exit $code), see $log and $findings"
     grep -E 'ERROR|SUMMARY|runtime error' "$log" | head -5 || true
-    status=1
+    echo "$line" | tee -a "$summary"
+    return 1
   fi
   echo "$line" | tee -a "$summary"
+}
+status=0 running=0
+for h in "${harnesses[@]}"; do
+  if (( ${LANES:-1} > 1 )); then
+    fuzz_one "$h" &
+    if (( ++running >= LANES )); then wait -n || status=1; running=$((running - 1)); fi
+  else
+    fuzz_one "$h" || status=1
+  fi
 done
+while (( running > 0 )); do wait -n || status=1; running=$((running - 1)); done
 exit $status

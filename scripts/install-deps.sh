@@ -11,7 +11,7 @@ packages=(
   libembree-dev
   xvfb  # the replay viewer's test runs under a virtual display
   slurm-wlm munge  # the sharded-export test starts a single-node Slurm cluster
-  clang  # the libFuzzer harnesses (scripts/fuzz.sh)
+  clang libclang-rt-dev  # the libFuzzer harnesses (scripts/fuzz.sh): Clang and its libFuzzer runtime
 )
 missing=()
 for p in "${packages[@]}"; do

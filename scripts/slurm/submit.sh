@@ -3,18 +3,19 @@
 # recording's frame count, and a join (join.sbatch) that runs once every task has succeeded.
 #
 #   submit.sh RECORDING SCENE OUTPUT [--shards N | --shard-frames K] [--work DIR] [--artrace BIN]
-#             [--cpus C] [--partition P] [--export-args "..."] [--sbatch-args "..."]
-#   submit.sh --manifest MANIFEST.json [--artrace BIN] [--cpus C] [--partition P]
+#             [--cpus C] [--partition P] [--export-args "..."] [--sbatch-args "..."] [--setup "CMD"]
+#   submit.sh --manifest MANIFEST.json [--artrace BIN] [--cpus C] [--partition P] [--setup "CMD"]
 #   submit.sh --resubmit WORK       # shard tasks whose shard is missing, and a new join
 #
 # RECORDING, SCENE, OUTPUT and WORK must be on a filesystem every node sees. Prints the job ids
 # ("array JID", "join JID"). A task that fails leaves no shard; --resubmit submits exactly the
 # missing ones again (the first submission's settings are kept in WORK/submit.env). Node failures
-# requeue tasks on their own (--requeue).
+# requeue tasks on their own (--requeue). --setup runs CMD in every task before artrace (a site's
+# environment, e.g. --setup "module load opencv tbb"; it is kept for --resubmit too).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 artrace=${ARTRACE:-$(command -v artrace || echo "$here/../../build/tools/artrace")}
-shards=0 shard_frames=0 work="" cpus=2 partition="" export_args="" sbatch_args="" manifest="" resubmit=""
+shards=0 shard_frames=0 work="" cpus=2 partition="" export_args="" sbatch_args="" manifest="" resubmit="" setup=""
 positional=()
 while (( $# )); do
   case $1 in
@@ -28,6 +29,7 @@ while (( $# )); do
     --sbatch-args) sbatch_args=$2; shift 2 ;;
     --manifest) manifest=$2; shift 2 ;;
     --resubmit) resubmit=$2; shift 2 ;;
+    --setup) setup=$2; shift 2 ;;
     -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
     *) positional+=("$1"); shift ;;
   esac
@@ -44,6 +46,7 @@ submit_join() {  # $1: dependency job id
 }
 
 if [ -n "$manifest" ]; then
+  export SETUP=$setup
   manifest=$(abs "$manifest")
   jobs=$(python3 -c 'import json,sys; print(len(json.load(open(sys.argv[1]))["jobs"]))' "$manifest")
   mkdir -p "$(dirname "$manifest")/log"
@@ -82,9 +85,9 @@ else
   SHARD_FRAMES=$shard_frames
   TASKS=$(( (TOTAL_FRAMES + SHARD_FRAMES - 1) / SHARD_FRAMES ))
   WORK=$(abs "${work:-$OUTPUT.shards}")
-  EXPORT_ARGS=$export_args
+  EXPORT_ARGS=$export_args SETUP=$setup
   mkdir -p "$WORK/log"
-  declare -p RECORDING SCENE OUTPUT ARTRACE TOTAL_FRAMES SHARD_FRAMES TASKS WORK EXPORT_ARGS > "$WORK/submit.env"
+  declare -p RECORDING SCENE OUTPUT ARTRACE TOTAL_FRAMES SHARD_FRAMES TASKS WORK EXPORT_ARGS SETUP > "$WORK/submit.env"
   list="0-$((TASKS - 1))"
   echo "$TOTAL_FRAMES frames in $TASKS shards of $SHARD_FRAMES"
 fi
