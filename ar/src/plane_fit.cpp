@@ -221,18 +221,27 @@ std::vector<Plane> detect_planes(const SensorFrame& f, const PlaneDetection& o) 
     }
     p->area_m2 = area;
     p->rms_m = std::sqrt(ss / std::max<size_t>(1, in.size()));
-    // the inlier nearest the inliers' image centroid: a pixel that sees the plane
+    // the pixel to list: an inlier where an anchor stands on this plane, i.e. where the fit around
+    // the pixel (plane_at_pixel) agrees with it (normals within 5 degrees, within 2 cm), tried
+    // from the inliers' image centroid outwards; near an edge the fit around a pixel can take in
+    // the neighbouring surface and tilt. A plane without such a pixel is not listed.
     const double cu = su / in.size(), cv = sv / in.size();
-    double best = 1e300;
+    std::vector<std::pair<double, int>> order;
+    order.reserve(in.size());
     for (const int i : in) {
       const Sample& s = all[static_cast<size_t>(i)];
-      const double d2 = (s.u - cu) * (s.u - cu) + (s.v - cv) * (s.v - cv);
-      if (d2 < best) {
-        best = d2;
-        p->pixel_u = s.u;
-        p->pixel_v = s.v;
-        p->point = s.p - p->normal * p->distance(s.p);
-      }
+      order.emplace_back((s.u - cu) * (s.u - cu) + (s.v - cv) * (s.v - cv), i);
+    }
+    std::sort(order.begin(), order.end());
+    bool anchorable = false;
+    for (size_t k = 0; k < std::min<size_t>(order.size(), 64) && !anchorable; ++k) {
+      const Sample& s = all[static_cast<size_t>(order[k].second)];
+      const std::optional<Plane> local = plane_at_pixel(f, s.u, s.v);
+      if (!local || local->normal.dot(p->normal) < std::cos(5.0 * M_PI / 180.0) || std::fabs(p->distance(local->point)) > 0.02) continue;
+      anchorable = true;
+      p->pixel_u = s.u;
+      p->pixel_v = s.v;
+      p->point = s.p - p->normal * p->distance(s.p);
     }
     // remove the inliers and go on
     std::vector<char> used(all.size(), 0);
@@ -242,7 +251,7 @@ std::vector<Plane> detect_planes(const SensorFrame& f, const PlaneDetection& o) 
       if (!used[i]) rest.push_back(all[i]);
     }
     all.swap(rest);
-    if (p->area_m2 >= o.min_area_m2) out.push_back(*p);
+    if (anchorable && p->area_m2 >= o.min_area_m2) out.push_back(*p);
   }
   std::sort(out.begin(), out.end(), [](const Plane& a, const Plane& b) { return a.area_m2 > b.area_m2; });
   return out;
