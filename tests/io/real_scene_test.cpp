@@ -64,7 +64,8 @@ bool on_floor(const Eigen::Vector3d& p) { return std::fabs(p.y()) < 3e-3 && std:
 bool on_table(const Eigen::Vector3d& p) { return std::fabs(p.y() - 0.76) < 3e-3 && std::fabs(p.x()) < 0.75 && std::fabs(p.z()) < 0.55; }
 
 /// A model anchored at a floor pixel and one at a table pixel of a noisy frame sit on those
-/// surfaces within 1 cm, their up axes within 1 degree of the surfaces' normals (+y).
+/// surfaces within 1 cm, their up axes within 1 degree of the surfaces' normals (+y), unmirrored,
+/// facing the camera turned by their rotation_deg; a third with an offset rises by it.
 TEST(RealScene, AnchorsSitOnTheFloorAndTheTable) {
   const auto noisy = room_recording("artrace_room_noisy_orbit", 20, 30.0, true);
   const auto exact = room_recording("artrace_room_exact_orbit", 20, 30.0, false);
@@ -79,20 +80,31 @@ TEST(RealScene, AnchorsSitOnTheFloorAndTheTable) {
   std::ofstream(dir / "scene.json") << R"({ "models": [
       { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string() << R"(", "anchor": { "frame": 0, "pixel": [)" << fu << "," << fv << R"(] } },
       { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string() << R"(", "anchor": { "frame": 0, "pixel": [)" << tu << "," << tv
-                                    << R"(], "rotation_deg": 45, "offset": 0.0 } } ] })";
+                                    << R"(], "rotation_deg": 45, "offset": 0.0 } },
+      { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string() << R"(", "anchor": { "frame": 0, "pixel": [)" << tu << "," << tv
+                                    << R"(], "offset": 0.1 } } ] })";
   ArSceneFile scene = load_ar_scene(dir / "scene.json");
   auto rec = open_recording(noisy);
   resolve_anchors(scene, *rec);
-  for (int i = 0; i < 2; ++i) {
+  const glm::vec3 eye(f.world_from_camera->translation().x(), f.world_from_camera->translation().y(), f.world_from_camera->translation().z());
+  for (int i = 0; i < 3; ++i) {
     const ArModelPlacement& p = scene.models[static_cast<size_t>(i)];
     ASSERT_TRUE(p.anchored.has_value());
     const glm::mat4 m = p.world_from_model();
     const glm::vec3 origin(m[3]), up = glm::normalize(glm::vec3(m[1]));
-    const float height = i == 0 ? 0.0f : 0.76f;
+    const float height = i == 0 ? 0.0f : i == 1 ? 0.76f : 0.86f;  // the third rises by its offset of 0.1 m
     EXPECT_NEAR(origin.y, height, 0.01f) << (i == 0 ? "floor" : "table");
+    // a rotation, not a mirror: +X = +Y x +Z, as the model's own axes are
+    EXPECT_GT(glm::determinant(glm::mat3(m)), 0.0f) << "model " << i << " is mirrored";
+    // +Z faces the camera along the surface, turned by rotation_deg about the normal (45 for the second)
+    glm::vec3 towards = eye - origin;
+    towards = glm::normalize(towards - up * glm::dot(up, towards));
+    const float turn = glm::degrees(std::acos(std::clamp(glm::dot(glm::normalize(glm::vec3(m[2])), towards), -1.0f, 1.0f)));
+    EXPECT_NEAR(turn, i == 1 ? 45.0f : 0.0f, 1.0f) << "model " << i;
     const float angle = glm::degrees(std::acos(std::clamp(up.y, -1.0f, 1.0f)));
     EXPECT_LT(angle, 1.0f) << (i == 0 ? "floor" : "table") << ": up axis " << up.x << "," << up.y << "," << up.z;
     // the origin lies on the ray of the anchor's pixel: where the camera saw the surface
+    if (i == 2) continue;  // raised off the surface: not on the pixel's ray
     const Eigen::Vector3d on_ray = world_point(f, i == 0 ? fu : tu, i == 0 ? fv : tv, 1.0) - f.world_from_camera->translation();
     const Eigen::Vector3d to_origin = Eigen::Vector3d(origin.x, origin.y, origin.z) - f.world_from_camera->translation();
     EXPECT_LT(on_ray.normalized().cross(to_origin.normalized()).norm(), 1e-3);
