@@ -71,10 +71,11 @@ CATALOGUE = [
     ("wide-tie-to-larger-primitive", "core/src/wide_traversal.inc",
      "if (t < best.t || (t == best.t && block.prim[i] < best.prim)) {", "if (t < best.t) {",
      "equal distances would go to whichever triangle is visited first, not the smaller one: not the kd-tree's hit"),
-    ("wide-pad-lanes-wrong-triangle", "core/src/wide_bvh_build.cpp",
-     "const Triangle& t = tris_[p == kInvalidId ? prims_[r.begin + kBlockLanes * b] : p];",
-     "const Triangle& t = tris_[p == kInvalidId ? 0u : p];",
-     "an empty lane would hold a triangle of elsewhere, hit under no name"),
+    # Not a mutant: padding a block's empty lanes with triangle 0 instead of the block's first
+    # triangle changes no answer. A padded lane holds a real triangle's geometry, so a ray meeting it
+    # also meets that triangle in its own leaf at the same distance, where the real id wins the tie
+    # against kInvalidId (and an any-hit answer is the same). It survived the whole suite and was
+    # taken out of the catalogue as an equivalent mutant.
     ("wide-build-sah-depth-unbounded", "core/src/wide_bvh_build.cpp",
      "if (depth >= kSahDepth) {", "if (false) {",
      "inputs that defeat the SAH would build trees deeper than the traversal's stack"),
