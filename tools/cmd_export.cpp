@@ -54,13 +54,8 @@ void run(const Options& opt) {
   source.seek(first);
 
   const std::filesystem::path out(opt.output);
-  const std::string ext = out.extension().string();
   const bool video = is_video_path(out);
-  const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + ext)
-                                              : std::filesystem::path(out.string() + ".partial");
-  if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
-  std::filesystem::remove_all(partial);
-  if (!video) std::filesystem::create_directories(partial);
+  const std::filesystem::path partial = prepare_partial(out);
   cv::VideoWriter writer;
   auto cleanup = [&] {
     writer.release();

@@ -57,12 +57,7 @@ void run_join(const JoinOptions& opt) {
 
   const std::filesystem::path out(opt.output);
   const bool video = is_video_path(out);
-  const std::string ext = out.extension().string();
-  const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + ext)
-                                              : std::filesystem::path(out.string() + ".partial");
-  if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
-  std::filesystem::remove_all(partial);
-  if (!video) std::filesystem::create_directories(partial);
+  const std::filesystem::path partial = prepare_partial(out);
   cv::VideoWriter writer;
   const double fps = opt.fps > 0.0 ? opt.fps : a.fps;
   g_join_interrupted = false;

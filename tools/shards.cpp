@@ -130,4 +130,14 @@ bool is_video_path(const std::filesystem::path& p) {
   return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
 }
 
+std::filesystem::path prepare_partial(const std::filesystem::path& out) {
+  const bool video = is_video_path(out);
+  const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + out.extension().string())
+                                              : std::filesystem::path(out.string() + ".partial");
+  if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
+  std::filesystem::remove_all(partial);
+  if (!video) std::filesystem::create_directories(partial);
+  return partial;
+}
+
 }  // namespace artrace::tools

@@ -55,5 +55,9 @@ void open_video_writer(cv::VideoWriter& writer, const std::filesystem::path& fil
                        cv::Size size);
 /// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov).
 bool is_video_path(const std::filesystem::path& p);
+/// Where an output is written before it is complete: "clip.partial.mp4" beside a clip (the
+/// extension kept, so that the encoder is chosen by it), "folder.partial" for a folder of PNGs.
+/// Leaves it empty (a folder made, a clip file removed) and makes the output's parent folder.
+std::filesystem::path prepare_partial(const std::filesystem::path& out);
 
 }  // namespace artrace::tools

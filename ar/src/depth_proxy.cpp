@@ -1,4 +1,5 @@
 #include "artrace/ar/depth_proxy.h"
+#include "packet_hits.h"
 
 #include "artrace/ar/pinhole_intrinsics.h"
 #include "artrace/core/srgb.h"
@@ -101,17 +102,10 @@ bool DepthProxy::intersect(const core::Ray& ray, float& t, glm::vec3& colour) co
 
 core::LaneMask DepthProxy::intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const {
   if (empty() || !frame_) return 0u;
-  core::HitPacket hits;
-  for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
-  scene_.intersect(rays, mask, hits);
-  core::LaneMask out = 0;
-  for (int i = 0; i < core::kPacketSize; ++i) {
-    if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
-    t[i] = hits.t[i];
+  return detail::packet_hits(scene_, rays, mask, t, colour, [&](int i, const core::HitPacket& hits, glm::vec3& c) {
     const core::Ray r = rays.get(i);
-    if (colour_at(r.org + hits.t[i] * r.dir, colour[i])) out |= 1u << i;
-  }
-  return out;
+    return colour_at(r.org + hits.t[i] * r.dir, c);
+  });
 }
 
 bool DepthProxy::colour_at(const glm::vec3& p, glm::vec3& colour) const {

@@ -1,4 +1,5 @@
 #include "artrace/ar/real_scene.h"
+#include "packet_hits.h"
 
 #include <stdexcept>
 #include <string>
@@ -50,17 +51,10 @@ bool FusedRoom::intersect(const core::Ray& ray, float& t, glm::vec3& colour) con
 }
 
 core::LaneMask FusedRoom::intersect(const core::RayPacket& rays, core::LaneMask mask, float* t, glm::vec3* colour) const {
-  core::HitPacket hits;
-  for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
-  scene_.intersect(rays, mask, hits);
-  core::LaneMask out = 0;
-  for (int i = 0; i < core::kPacketSize; ++i) {
-    if (!((mask >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
-    t[i] = hits.t[i];
-    colour[i] = colour_at(hits.get(i));
-    out |= 1u << i;
-  }
-  return out;
+  return detail::packet_hits(scene_, rays, mask, t, colour, [&](int i, const core::HitPacket& hits, glm::vec3& c) {
+    c = colour_at(hits.get(i));
+    return true;
+  });
 }
 
 glm::vec3 FusedRoom::normal(const core::Hit& hit, const glm::vec3& dir) const {
