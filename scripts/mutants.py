@@ -125,6 +125,17 @@ CATALOGUE = [
     ("intrinsics-image-size-unchecked", "io/src/intrinsics_file.cpp",
      "if (!(v >= 0.0 && v <= 100000.0) || v != std::floor(v)) {", "if (false) {",
      "a width beyond int would be converted to int (undefined behaviour), a fractional one truncated"),
+    # declared sizes checked before allocating (found by fuzzing)
+    ("ppm-allocates-before-checking", "io/src/bart_shading.cpp",
+     "  if (held < n * bytes_per) {", "  if (false) {",
+     "a PPM header declaring a huge image would make the reader allocate and zero gigabytes for a few bytes"),
+    ("gltf-image-size-unchecked", "io/src/gltf_model.cpp",
+     "constexpr uint32_t kMaxTextureSide = 16384;", "constexpr uint32_t kMaxTextureSide = 1u << 20;",
+     "an image declaring 40000 x 40000 pixels would reach OpenCV's decoder, which allocates for it first"),
+    ("oni-jpeg-size-unchecked", "io/src/oni_codecs.cpp",
+     "  if (declared->width != static_cast<uint32_t>(width) || declared->height != static_cast<uint32_t>(height)) {",
+     "  if (false) {",
+     "a colour frame declaring a huge JPEG would be decoded (gigabytes allocated) before its size is compared with the mode's"),
     # scale-out: shards must tile the frames
     ("shards-gap-unreported", "tools/shards.cpp",
      "if (s.first > covered) out.push_back(", "if (false) out.push_back(",

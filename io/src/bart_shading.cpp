@@ -59,6 +59,17 @@ core::Texture load_ppm(const std::filesystem::path& path) {
   // the header ends with exactly one white-space character, already read by ppm_token
   const size_t bytes_per = maxval < 256 ? 1 : 2;
   const size_t n = static_cast<size_t>(t.width) * t.height * 3;
+  // check what the header declares against what the file holds before allocating for it
+  const std::streamoff header_end = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streamoff file_end = in.tellg();
+  in.seekg(header_end);
+  if (header_end < 0 || file_end < header_end) throw ParseError(file, 0, 0, "cannot measure the pixel data");
+  const size_t held = static_cast<size_t>(file_end - header_end);
+  if (held < n * bytes_per) {
+    throw ParseError(file, 0, 0, "truncated pixel data: the header declares " + std::to_string(t.width) + "x" + std::to_string(t.height) + " pixels (" +
+                                     std::to_string(n * bytes_per) + " bytes) but " + std::to_string(held) + " bytes follow it");
+  }
   std::vector<uint8_t> data(n * bytes_per);
   in.read(reinterpret_cast<char*>(data.data()), static_cast<std::streamsize>(data.size()));
   if (static_cast<size_t>(in.gcount()) != data.size()) {

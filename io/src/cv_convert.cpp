@@ -2,6 +2,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
+
 namespace artrace::io {
 
 ar::ColorImage color_from_bgr(const cv::Mat& bgr) {
@@ -25,6 +27,37 @@ ar::DepthImage depth_from_u16(const cv::Mat& raw, double per_metre) {
     for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : ar::depth_metres(row[x], per_metre);
   }
   return d;
+}
+
+std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
+  const auto be16 = [&](size_t i) { return static_cast<uint32_t>(d[i] << 8 | d[i + 1]); };
+  const auto be32 = [&](size_t i) { return be16(i) << 16 | be16(i + 2); };
+  static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  if (size >= 24 && std::equal(kPng, kPng + 8, d) && std::equal(d + 12, d + 16, "IHDR")) return ImageSize{be32(16), be32(20)};
+  if (size < 4 || d[0] != 0xFF || d[1] != 0xD8) return std::nullopt;
+  // JPEG: walk the marker segments (FF xx, then a big-endian length that counts itself) to the
+  // first start-of-frame marker, SOF0..SOF15 less DHT (C4), JPG (C8) and DAC (CC)
+  size_t pos = 2;
+  while (pos + 4 <= size) {
+    if (d[pos] != 0xFF) return std::nullopt;
+    const uint8_t m = d[pos + 1];
+    if (m == 0xFF) {  // fill byte
+      ++pos;
+      continue;
+    }
+    if (m == 0x01 || (m >= 0xD0 && m <= 0xD7)) {  // markers without a segment
+      pos += 2;
+      continue;
+    }
+    const uint32_t len = be16(pos + 2);
+    if (m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC) {
+      if (len < 7 || pos + 9 > size) return std::nullopt;
+      return ImageSize{be16(pos + 7), be16(pos + 5)};  // precision, height, width
+    }
+    if (m == 0xDA || m == 0xD9 || len < 2) return std::nullopt;  // scan data before a frame header
+    pos += 2 + len;
+  }
+  return std::nullopt;
 }
 
 }  // namespace artrace::io

@@ -1,5 +1,6 @@
 #include "artrace/io/gltf_model.h"
 #include "artrace/io/parse_error.h"
+#include "cv_convert.h"
 
 #include <tiny_gltf.h>
 
@@ -14,6 +15,7 @@
 #include <cstring>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -24,11 +26,25 @@ namespace {
 const std::set<std::string> kSupported = {"KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_emissive_strength",
                                           "KHR_materials_transmission", "KHR_materials_ior"};
 
+/// The largest texture side read (as GPUs' usual limit); larger declared sizes are refused.
+constexpr uint32_t kMaxTextureSide = 16384;
+
 /// tinygltf's image hook: PNG and JPEG (and what else OpenCV reads) to 8-bit RGBA.
 bool decode_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int, const unsigned char* bytes,
                   int size, void*) {
+  const auto fail = [&](const std::string& what) {
+    if (err) *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) + ") " + what + "\n";
+    return false;
+  };
+  // glTF images are PNG or JPEG; their declared size is checked before anything is allocated for it
+  const std::optional<ImageSize> declared = size > 0 ? declared_image_size(bytes, static_cast<size_t>(size)) : std::nullopt;
+  if (!declared) return fail("is not a PNG or JPEG image");
+  if (declared->width == 0 || declared->height == 0 || declared->width > kMaxTextureSide || declared->height > kMaxTextureSide) {
+    return fail("declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) + " pixels (textures of 1 to " +
+                std::to_string(kMaxTextureSide) + " pixels a side are read)");
+  }
   const cv::Mat buf(1, size, CV_8UC1, const_cast<unsigned char*>(bytes));
-  cv::Mat m = size > 0 ? cv::imdecode(buf, cv::IMREAD_UNCHANGED) : cv::Mat();
+  cv::Mat m = cv::imdecode(buf, cv::IMREAD_UNCHANGED);
   if (m.empty()) {
     if (err) {
       *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) +

@@ -1,10 +1,12 @@
 #include "artrace/io/oni_codecs.h"
+#include "cv_convert.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <cstring>
+#include <optional>
 
 namespace artrace::io {
 
@@ -129,13 +131,20 @@ void decode_16z(const uint8_t* in, size_t size, bool table, size_t count, uint16
 
 void decode_jpeg_rgb(const uint8_t* data, size_t size, int width, int height, std::vector<uint8_t>& rgb) {
   if (size < 4 || data[0] != 0xFF || data[1] != 0xD8) throw DecodeError(0, "not a JPEG image (no FF D8 marker)");
+  // the size the image declares must be the stream's mode: checked before OpenCV allocates for it
+  const std::optional<ImageSize> declared = declared_image_size(data, size);
+  if (!declared) throw DecodeError(0, "the JPEG image has no frame header (SOF marker)");
+  const auto mismatch = [&](const char* what, uint32_t w, uint32_t h) {
+    return DecodeError(0, std::string("the JPEG image ") + what + " " + std::to_string(w) + "x" + std::to_string(h) + " pixels, the stream's mode " +
+                              std::to_string(width) + "x" + std::to_string(height));
+  };
+  if (declared->width != static_cast<uint32_t>(width) || declared->height != static_cast<uint32_t>(height)) {
+    throw mismatch("declares", declared->width, declared->height);
+  }
   const cv::Mat buf(1, static_cast<int>(size), CV_8UC1, const_cast<uint8_t*>(data));
   const cv::Mat bgr = cv::imdecode(buf, cv::IMREAD_COLOR);
   if (bgr.empty()) throw DecodeError(0, "the JPEG image does not decode");
-  if (bgr.cols != width || bgr.rows != height) {
-    throw DecodeError(0, "the JPEG image is " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows) + ", the stream's mode " +
-                             std::to_string(width) + "x" + std::to_string(height));
-  }
+  if (bgr.cols != width || bgr.rows != height) throw mismatch("decodes to", static_cast<uint32_t>(bgr.cols), static_cast<uint32_t>(bgr.rows));
   rgb.resize(static_cast<size_t>(width) * height * 3);
   cv::Mat out(height, width, CV_8UC3, rgb.data());
   cv::cvtColor(bgr, out, cv::COLOR_BGR2RGB);

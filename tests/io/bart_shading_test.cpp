@@ -54,6 +54,23 @@ TEST(Ppm, BrokenFilesAreRefusedWithTheFileNamed) {
   std::filesystem::remove_all(dir);
 }
 
+// Found by fuzz_ppm: a header declaring a huge image made the reader allocate (and zero) memory for
+// it before noticing that the file holds a few bytes. The sizes are now checked against the file
+// first, and the error says what the header declares and what follows it.
+TEST(Ppm, HugeDeclaredSizeIsRefusedBeforeAllocating) {
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm_huge";
+  std::filesystem::create_directories(dir);
+  write_bytes(dir / "huge.ppm", std::string("P6\n8000 8000\n65535\n") + std::string(5, '\x01'));
+  try {
+    load_ppm(dir / "huge.ppm");
+    ADD_FAILURE() << "accepted";
+  } catch (const ParseError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("8000x8000 pixels (384000000 bytes) but 5 bytes follow"), std::string::npos) << msg;
+  }
+  std::filesystem::remove_all(dir);
+}
+
 TEST(BartShading, KitchenRendersTheSameForAnyThreadCountAndSecondaryRayGrouping) {
   ARTRACE_REQUIRE_SHARED("bart/kitchen/aff/kitchen.aff");
   const AffScene aff = load_aff(shared_path);

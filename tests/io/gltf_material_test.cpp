@@ -7,6 +7,7 @@
 #include "artrace/io/ar_scene.h"
 #include "artrace/io/parse_error.h"
 #include "../test_util.h"
+#include "../../io/src/cv_convert.h"
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -406,6 +407,56 @@ TEST(GltfGeometry, UnsupportedRequiredExtensionIsAnErrorOptionalOnesAWarning) {
       EXPECT_NE(std::string(e.what()).find((dir / name).string()), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find(name[0] == 'm' ? "nowhere.png" : "broken"), std::string::npos) << e.what();
     }
+  }
+}
+
+// The image header sniffer that guards OpenCV's decoder, against images OpenCV encodes (the
+// oracle): PNG, baseline and progressive JPEG, of sizes that are not square; other bytes give none.
+TEST(GltfImages, DeclaredSizeIsReadFromPngAndJpegHeaders) {
+  for (const auto& [ext, params] : std::vector<std::pair<std::string, std::vector<int>>>{
+           {".png", {}}, {".jpg", {}}, {".jpg", {cv::IMWRITE_JPEG_PROGRESSIVE, 1}}}) {
+    for (const auto& [w, h] : {std::pair{37, 5}, std::pair{300, 1023}}) {
+      std::vector<uint8_t> bytes;
+      ASSERT_TRUE(cv::imencode(ext, cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 200, 30)), bytes, params));
+      const auto got = declared_image_size(bytes.data(), bytes.size());
+      ASSERT_TRUE(got.has_value()) << ext;
+      EXPECT_EQ(got->width, static_cast<uint32_t>(w)) << ext;
+      EXPECT_EQ(got->height, static_cast<uint32_t>(h)) << ext;
+      EXPECT_FALSE(declared_image_size(bytes.data(), 20).has_value()) << ext << ": cut inside the header";
+    }
+  }
+  const uint8_t bmp[30] = {'B', 'M'};
+  EXPECT_FALSE(declared_image_size(bmp, sizeof bmp).has_value());
+}
+
+// An image whose header declares a size beyond 16384 a side is refused, naming the image and the
+// size, before anything is allocated for it (found by fuzzing: such a PNG made OpenCV allocate
+// gigabytes); the same image at its true size loads.
+TEST(GltfImages, HugeDeclaredImageIsRefusedBeforeDecoding) {
+  const auto dir = test_dir("artrace_gltf_huge");
+  std::vector<uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(2, 2, CV_8UC3, cv::Scalar(1, 2, 3)), png));
+  QuadGltf q = QuadGltf::at(-1, 1, -1, 1, 2);
+  q.textures = {{{"source", 0}}};
+  q.material = {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}};
+  q.images = {{{"uri", "data:image/png;base64," + base64(png)}, {"name", "small"}}};
+  q.write(dir / "small.gltf");
+  EXPECT_EQ(load_gltf(dir / "small.gltf").images.size(), 1u);
+  // IHDR width and height (big-endian, bytes 16..23) set to 40000 x 40000; the CRC is left wrong,
+  // which a decoder would notice only after allocating
+  for (const int at : {16, 20}) {
+    png[at] = 0;
+    png[at + 1] = 0;
+    png[at + 2] = 40000 >> 8;
+    png[at + 3] = 40000 & 255;
+  }
+  q.images = {{{"uri", "data:image/png;base64," + base64(png)}, {"name", "huge"}}};
+  q.write(dir / "huge.gltf");
+  try {
+    load_gltf(dir / "huge.gltf");
+    ADD_FAILURE() << "accepted";
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("image 0 (huge) declares 40000x40000 pixels"), std::string::npos) << e.what();
   }
 }
 

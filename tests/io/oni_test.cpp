@@ -383,6 +383,17 @@ TEST(OniReal, CorruptCompressedFramesAreRefusedWithTheByte) {
   std::string not_jpeg = bytes;
   not_jpeg[c1.data_offset] = 0;
   EXPECT_NE(read_all("not_jpeg.oni", not_jpeg).find("colour frame 1 (JPEG): not a JPEG image"), std::string::npos);
+  // a JPEG whose frame header (baseline SOF0: FF C0, length, precision, height, width) declares
+  // 30000 x 30000: refused against the stream's mode before anything is decoded (or allocated)
+  std::string huge_jpeg = bytes;
+  const size_t sof = huge_jpeg.find("\xff\xc0", c1.data_offset);
+  ASSERT_LT(sof, static_cast<size_t>(c1.data_offset + c1.data_size));
+  for (const size_t at : {sof + 5, sof + 7}) {
+    huge_jpeg[at] = static_cast<char>(30000 >> 8);
+    huge_jpeg[at + 1] = static_cast<char>(30000 & 255);
+  }
+  const std::string e2 = read_all("huge_jpeg.oni", huge_jpeg);
+  EXPECT_NE(e2.find("colour frame 1 (JPEG): the JPEG image declares 30000x30000 pixels, the stream's mode 640x480"), std::string::npos) << e2;
   // random byte changes in the frames
   std::mt19937 rng(29);
   std::uniform_int_distribution<size_t> at(d0.data_offset, bytes.size() - 1);
@@ -390,7 +401,9 @@ TEST(OniReal, CorruptCompressedFramesAreRefusedWithTheByte) {
     std::string m = bytes;
     for (int j = 0; j < 8; ++j) m[at(rng)] = static_cast<char>(rng());
     const std::string e = read_all("mutant.oni", m);
-    if (!e.empty()) EXPECT_NE(e.find("mutant.oni"), std::string::npos) << e;
+    if (!e.empty()) {
+      EXPECT_NE(e.find("mutant.oni"), std::string::npos) << e;
+    }
   }
 }
 
