@@ -72,7 +72,7 @@ TEST(WideBvh, RandomSoupsEqualBruteForceOnEveryInstructionSet) {
   for (const uint32_t seed : {1u, 2u, 3u}) {
     std::mt19937 rng(seed);
     const auto tris = test::random_soup(rng, 3000, seed == 3 ? 2.0f : 0.4f);
-    std::vector<Ray> rays = test::random_rays(rng, 4000);
+    std::vector<Ray> rays = test::random_rays(rng, test::brute_force_rays(4000));
     for (size_t i = 0; i < rays.size(); i += 3) rays[i].tmax = 3.0f;  // segments, as shadow rays are
     const WideBvh bvh(tris);
     on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "seed " + std::to_string(seed) + ", " + level); });
