@@ -11,6 +11,7 @@ namespace artrace::ar {
 namespace {
 
 int wrap(int i, int n, Wrap w) {
+  if (static_cast<unsigned>(i) < static_cast<unsigned>(n)) return i;  // inside the image, as most are: every mode agrees
   switch (w) {
     case Wrap::kClampToEdge:
       return std::clamp(i, 0, n - 1);
@@ -101,8 +102,11 @@ glm::vec4 Texture::bilinear(int level, glm::vec2 uv, const TextureSampler& s) co
   const float fx0 = std::floor(px), fy0 = std::floor(py);
   const int x0 = static_cast<int>(fx0), y0 = static_cast<int>(fy0);
   const float fx = px - fx0, fy = py - fy0;
-  const glm::vec4 a = texel(level, x0, y0, s), b = texel(level, x0 + 1, y0, s);
-  const glm::vec4 c = texel(level, x0, y0 + 1, s), d = texel(level, x0 + 1, y0 + 1, s);
+  // the four texels' columns and rows, each wrapped once
+  const size_t xa = static_cast<size_t>(wrap(x0, l.width, s.wrap_s)) * 4, xb = static_cast<size_t>(wrap(x0 + 1, l.width, s.wrap_s)) * 4;
+  const uint8_t* row0 = &l.rgba[static_cast<size_t>(wrap(y0, l.height, s.wrap_t)) * l.width * 4];
+  const uint8_t* row1 = &l.rgba[static_cast<size_t>(wrap(y0 + 1, l.height, s.wrap_t)) * l.width * 4];
+  const glm::vec4 a = decode(row0 + xa), b = decode(row0 + xb), c = decode(row1 + xa), d = decode(row1 + xb);
   return (a * (1.0f - fx) + b * fx) * (1.0f - fy) + (c * (1.0f - fx) + d * fx) * fy;
 }
 
