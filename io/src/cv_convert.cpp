@@ -34,6 +34,20 @@ std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
   const auto be32 = [&](size_t i) { return be16(i) << 16 | be16(i + 2); };
   static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
   if (size >= 24 && std::equal(kPng, kPng + 8, d) && std::equal(d + 12, d + 16, "IHDR")) return ImageSize{be32(16), be32(20)};
+  // WebP (EXT_texture_webp): a RIFF file whose first chunk is VP8 (lossy: 14-bit sizes in the
+  // key frame header), VP8L (lossless: 14-bit sizes less one, packed) or VP8X (24-bit canvas sizes
+  // less one)
+  if (size >= 30 && std::equal(d, d + 4, "RIFF") && std::equal(d + 8, d + 12, "WEBP")) {
+    const auto le16 = [&](size_t i) { return static_cast<uint32_t>(d[i] | d[i + 1] << 8); };
+    const auto le24 = [&](size_t i) { return static_cast<uint32_t>(d[i] | d[i + 1] << 8 | d[i + 2] << 16); };
+    if (std::equal(d + 12, d + 16, "VP8 ")) return ImageSize{le16(26) & 0x3FFF, le16(28) & 0x3FFF};
+    if (std::equal(d + 12, d + 16, "VP8L")) {
+      const uint32_t bits = le16(21) | le16(23) << 16;
+      return ImageSize{(bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1};
+    }
+    if (std::equal(d + 12, d + 16, "VP8X")) return ImageSize{le24(24) + 1, le24(27) + 1};
+    return std::nullopt;
+  }
   if (size < 4 || d[0] != 0xFF || d[1] != 0xD8) return std::nullopt;
   // JPEG: walk the marker segments (FF xx, then a big-endian length that counts itself) to the
   // first start-of-frame marker, SOF0..SOF15 less DHT (C4), JPG (C8) and DAC (CC)

@@ -16,7 +16,7 @@ ar::ColorImage color_from_bgr(const cv::Mat& bgr);
 /// 16-bit depth in `per_metre` units to metres; 0 and 65535 (saturated) become "no reading".
 ar::DepthImage depth_from_u16(const cv::Mat& raw, double per_metre);
 
-/// Width and height a PNG (IHDR) or JPEG (first SOF marker) image declares, read from its header
+/// Width and height a PNG (IHDR), JPEG (first SOF marker) or WebP image declares, read from its header
 /// without decoding it; nullopt for other or unreadable headers. Lets a reader refuse an image
 /// whose declared size is absurd before OpenCV allocates for it.
 struct ImageSize {

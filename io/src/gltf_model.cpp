@@ -36,9 +36,10 @@ bool decode_image(tinygltf::Image* image, const int index, std::string* err, std
     if (err) *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) + ") " + what + "\n";
     return false;
   };
-  // glTF images are PNG or JPEG; their declared size is checked before anything is allocated for it
+  // glTF images are PNG or JPEG (WebP with EXT_texture_webp); the size a header declares is checked
+  // before anything is allocated for it
   const std::optional<ImageSize> declared = size > 0 ? declared_image_size(bytes, static_cast<size_t>(size)) : std::nullopt;
-  if (!declared) return fail("is not a PNG or JPEG image");
+  if (!declared) return fail("is not a PNG, JPEG or WebP image");
   if (declared->width == 0 || declared->height == 0 || declared->width > kMaxTextureSide || declared->height > kMaxTextureSide) {
     return fail("declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) + " pixels (textures of 1 to " +
                 std::to_string(kMaxTextureSide) + " pixels a side are read)");
@@ -48,7 +49,7 @@ bool decode_image(tinygltf::Image* image, const int index, std::string* err, std
   if (m.empty()) {
     if (err) {
       *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) +
-              ") cannot be decoded (not a PNG or JPEG image OpenCV reads)\n";
+              ") cannot be decoded (its header is sound, its data is not)\n";
     }
     return false;
   }

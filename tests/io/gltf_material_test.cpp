@@ -411,10 +411,16 @@ TEST(GltfGeometry, UnsupportedRequiredExtensionIsAnErrorOptionalOnesAWarning) {
 }
 
 // The image header sniffer that guards OpenCV's decoder, against images OpenCV encodes (the
-// oracle): PNG, baseline and progressive JPEG, of sizes that are not square; other bytes give none.
+// oracle): PNG, baseline and progressive JPEG, lossy and lossless WebP, of sizes that are not
+// square; other bytes give none.
 TEST(GltfImages, DeclaredSizeIsReadFromPngAndJpegHeaders) {
   for (const auto& [ext, params] : std::vector<std::pair<std::string, std::vector<int>>>{
-           {".png", {}}, {".jpg", {}}, {".jpg", {cv::IMWRITE_JPEG_PROGRESSIVE, 1}}}) {
+           {".png", {}},
+           {".jpg", {}},
+           {".jpg", {cv::IMWRITE_JPEG_PROGRESSIVE, 1}},
+           {".webp", {cv::IMWRITE_WEBP_QUALITY, 90}},
+           {".webp", {cv::IMWRITE_WEBP_QUALITY, 101}}}) {  // above 100: lossless
+    if (!cv::haveImageWriter(ext)) continue;
     for (const auto& [w, h] : {std::pair{37, 5}, std::pair{300, 1023}}) {
       std::vector<uint8_t> bytes;
       ASSERT_TRUE(cv::imencode(ext, cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 200, 30)), bytes, params));
