@@ -136,6 +136,9 @@ CATALOGUE = [
      "  if (declared->width != static_cast<uint32_t>(width) || declared->height != static_cast<uint32_t>(height)) {",
      "  if (false) {",
      "a colour frame declaring a huge JPEG would be decoded (gigabytes allocated) before its size is compared with the mode's"),
+    ("oni-yuv422-odd-width-accepted", "io/src/oni_codecs.cpp",
+     "  if (format == 2 && width % 2 != 0) throw", "  if (false) throw",
+     "an odd-width YUV422 frame would reach OpenCV's conversion, which writes past the image"),
     # scale-out: shards must tile the frames
     ("shards-gap-unreported", "tools/shards.cpp",
      "if (s.first > covered) out.push_back(", "if (false) out.push_back(",

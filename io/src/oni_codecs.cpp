@@ -154,6 +154,9 @@ void decode_raw_rgb(const uint8_t* data, size_t size, int format, int width, int
   const size_t pixels = static_cast<size_t>(width) * height;
   const size_t bpp = format == 1 ? 3 : format == 2 ? 2 : format == 3 ? 1 : 0;
   if (bpp == 0) throw DecodeError(0, "uncompressed colour in pixel format " + std::to_string(format) + " (this reader takes 1 RGB24, 2 YUV422, 3 GRAY8)");
+  // YUV422 packs two pixels in four bytes (U Y0 V Y1): an odd width is no such frame (and OpenCV's
+  // conversion, given one, reads and writes past the rows: found by fuzz_oni_codecs)
+  if (format == 2 && width % 2 != 0) throw DecodeError(0, "a YUV422 frame needs an even width, this one is " + std::to_string(width));
   if (size != pixels * bpp) {
     throw DecodeError(0, "an uncompressed " + std::to_string(width) + "x" + std::to_string(height) + " frame takes " + std::to_string(pixels * bpp) +
                              " bytes, this one has " + std::to_string(size));

@@ -5,6 +5,7 @@
 #include <random>
 
 #include "../test_util.h"
+#include "artrace/io/oni_codecs.h"
 #include "artrace/io/oni_file.h"
 #include "artrace/io/oni_reader.h"
 #include "artrace/io/openni2_reader.h"
@@ -359,6 +360,29 @@ TEST(OniReal, QvgaNeverFinalisedIsReadByScanning) {
   expect_stats(first.depth, 59719, 2286, 6622, 2995.886, "first depth frame");
   expect_stats(last.depth, 59664, 1663, 6375, 2982.181, "last depth frame");
   expect_colour_mean(first.color, 85.1510, 85.5456, 77.8851);
+}
+
+// Uncompressed YUV422 colour (U Y0 V Y1 for each pair of pixels): grey (U = V = 128) stays grey
+// and brighter Y gives brighter pixels; an odd width is refused (found by fuzz_oni_codecs:
+// OpenCV's conversion, given one, wrote past the end of the image).
+TEST(OniCodecs, Yuv422DecodesPairsAndRefusesAnOddWidth) {
+  const std::vector<uint8_t> frame = {128, 60, 128, 200, 128, 120, 128, 121};  // 4 x 1
+  std::vector<uint8_t> rgb;
+  decode_raw_rgb(frame.data(), frame.size(), 2, 4, 1, rgb);
+  ASSERT_EQ(rgb.size(), 12u);
+  for (int p = 0; p < 4; ++p) {
+    EXPECT_EQ(rgb[3 * p], rgb[3 * p + 1]) << "pixel " << p;
+    EXPECT_EQ(rgb[3 * p], rgb[3 * p + 2]) << "pixel " << p;
+  }
+  EXPECT_LT(rgb[0], rgb[6]);
+  EXPECT_LT(rgb[6], rgb[3]);
+  EXPECT_LE(rgb[6], rgb[9]);
+  try {
+    decode_raw_rgb(frame.data(), 6, 2, 3, 1, rgb);
+    ADD_FAILURE() << "an odd width was accepted";
+  } catch (const DecodeError& e) {
+    EXPECT_NE(std::string(e.what()).find("a YUV422 frame needs an even width, this one is 3"), std::string::npos) << e.what();
+  }
 }
 
 /// Bytes of a real 16zT/JPEG recording changed: every change is either read or refused with the
