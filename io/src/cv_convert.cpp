@@ -1,8 +1,14 @@
 #include "cv_convert.h"
 
+#include "artrace/io/parse_error.h"
+
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <fstream>
+#include <limits>
+#include <vector>
 
 namespace artrace::io {
 
@@ -27,6 +33,23 @@ ar::DepthImage depth_from_u16(const cv::Mat& raw, double per_metre) {
     for (int x = 0; x < raw.cols; ++x) out[x] = (row[x] == 0 || row[x] == 65535) ? 0.0f : ar::depth_metres(row[x], per_metre);
   }
   return d;
+}
+
+std::string png_chunk_error(const uint8_t* d, size_t size) {
+  static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  if (size < 8 || !std::equal(kPng, kPng + 8, d)) return "";
+  size_t pos = 8;
+  while (pos + 8 <= size) {
+    const uint64_t length = static_cast<uint64_t>(d[pos]) << 24 | d[pos + 1] << 16 | d[pos + 2] << 8 | d[pos + 3];
+    const std::string type(reinterpret_cast<const char*>(d + pos + 4), 4);
+    if (length + 12 > size - pos) {
+      return "its " + type + " chunk at byte " + std::to_string(pos) + " declares " + std::to_string(length) + " bytes, " +
+             std::to_string(size - pos < 12 ? 0 : size - pos - 12) + " follow";
+    }
+    if (type == "IEND") return "";
+    pos += 12 + length;
+  }
+  return "";
 }
 
 std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
@@ -72,6 +95,24 @@ std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
     pos += 2 + len;
   }
   return std::nullopt;
+}
+
+cv::Mat read_image_file(const std::filesystem::path& path, int flags) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return cv::Mat();
+  const std::streamoff size = in.tellg();
+  if (size <= 0 || size > std::numeric_limits<int>::max()) return cv::Mat();
+  std::vector<uint8_t> bytes(static_cast<size_t>(size));
+  in.seekg(0);
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), size)) return cv::Mat();
+  if (const std::string bad = png_chunk_error(bytes.data(), bytes.size()); !bad.empty()) {
+    throw ParseError(path.string(), 0, 0, "a broken PNG: " + bad);
+  }
+  if (const auto declared = declared_image_size(bytes.data(), bytes.size()); declared && (declared->width > 16384 || declared->height > 16384)) {
+    throw ParseError(path.string(), 0, 0, "the image declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) +
+                                              " pixels (images of up to 16384 a side are read)");
+  }
+  return cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<uint8_t*>(bytes.data())), flags);
 }
 
 }  // namespace artrace::io

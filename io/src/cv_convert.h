@@ -6,8 +6,10 @@
 #include <opencv2/core.hpp>
 
 #include <cstddef>
+#include <filesystem>
 #include <cstdint>
 #include <optional>
+#include <string>
 
 namespace artrace::io {
 
@@ -23,5 +25,14 @@ struct ImageSize {
   uint32_t width = 0, height = 0;
 };
 std::optional<ImageSize> declared_image_size(const uint8_t* data, size_t size);
+/// For a PNG: what is wrong with its chunk structure (a chunk whose length runs past the data,
+/// which libpng would allocate for before reading), or "" when every chunk up to IEND fits. ""
+/// for other formats.
+std::string png_chunk_error(const uint8_t* data, size_t size);
+/// An image file decoded by OpenCV (`flags` as cv::imread's), after its header is checked: a PNG
+/// whose chunks run past the file, or a PNG or JPEG declaring more than 16384 pixels a side, is a
+/// ParseError naming the file (OpenCV would allocate for the declared size first). Empty when the
+/// file is missing or OpenCV cannot decode it; the caller says which image it was.
+cv::Mat read_image_file(const std::filesystem::path& path, int flags);
 
 }  // namespace artrace::io

@@ -44,6 +44,8 @@ bool decode_image(tinygltf::Image* image, const int index, std::string* err, std
     return fail("declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) + " pixels (textures of 1 to " +
                 std::to_string(kMaxTextureSide) + " pixels a side are read)");
   }
+  // a PNG chunk whose length runs past the data would have libpng allocate that length first
+  if (const std::string bad = png_chunk_error(bytes, static_cast<size_t>(size)); !bad.empty()) return fail("is a broken PNG: " + bad);
   const cv::Mat buf(1, size, CV_8UC1, const_cast<unsigned char*>(bytes));
   cv::Mat m = cv::imdecode(buf, cv::IMREAD_UNCHANGED);
   if (m.empty()) {

@@ -91,11 +91,11 @@ bool ImageFolderReader::next(ar::SensorFrame& f) {
     ++video_->position;
   } else {
     color_name = color_files_[static_cast<size_t>(cursor_)].string();
-    bgr = cv::imread(color_name, cv::IMREAD_COLOR);
+    bgr = read_image_file(color_name, cv::IMREAD_COLOR);
     if (bgr.empty()) throw ParseError(color_name, 0, 0, "cannot decode the colour image");
   }
   const std::string depth_name = depth_files_[static_cast<size_t>(cursor_)].string();
-  const cv::Mat raw = cv::imread(depth_name, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  const cv::Mat raw = read_image_file(depth_name, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw ParseError(depth_name, 0, 0, "cannot decode the depth image");
   if (raw.type() != CV_16UC1) throw ParseError(depth_name, 0, 0, "depth PNG must be 16-bit with one channel");
   f = ar::SensorFrame{};

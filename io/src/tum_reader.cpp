@@ -249,9 +249,9 @@ ar::SensorFrame TumReader::read(int64_t i) const {
   f.color_time_s = e.color.time_s;
   f.depth_time_s = e.depth.time_s;
   const std::filesystem::path cp = folder_ / e.color.file, dp = folder_ / e.depth.file;
-  const cv::Mat bgr = cv::imread(cp.string(), cv::IMREAD_COLOR);
+  const cv::Mat bgr = read_image_file(cp, cv::IMREAD_COLOR);
   if (bgr.empty()) throw ParseError(cp.string(), 0, 0, "cannot decode the colour image (missing, truncated or not an image)");
-  const cv::Mat raw = cv::imread(dp.string(), cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  const cv::Mat raw = read_image_file(dp, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw ParseError(dp.string(), 0, 0, "cannot decode the depth image (missing, truncated or not an image)");
   if (raw.type() != CV_16UC1) {
     throw ParseError(dp.string(), 0, 0, "depth PNG must be 16-bit with one channel, got OpenCV type " + std::to_string(raw.type()));

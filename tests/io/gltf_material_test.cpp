@@ -466,6 +466,33 @@ TEST(GltfImages, HugeDeclaredImageIsRefusedBeforeDecoding) {
   }
 }
 
+// A PNG of sound size with a text chunk declaring 1.85 GB, which libpng would allocate before
+// reading it (found by fuzzing: a 25 kB .glb took 1.9 GB and 2 s to refuse). The chunk structure is
+// checked first: the error names the chunk, where it starts and what it declares.
+TEST(GltfImages, PngChunkRunningPastTheDataIsRefusedBeforeDecoding) {
+  const auto dir = test_dir("artrace_gltf_chunk");
+  std::vector<uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(2, 2, CV_8UC3, cv::Scalar(1, 2, 3)), png));
+  // after IHDR (8-byte signature, then 8 + 13 + 4 bytes): an iTXt chunk declaring 1,852,142,681 bytes
+  const std::vector<uint8_t> itxt = {0x6e, 0x65, 0x74, 0x59, 'i', 'T', 'X', 't', 'a', 'b', 'c'};
+  png.insert(png.begin() + 33, itxt.begin(), itxt.end());
+  QuadGltf q = QuadGltf::at(-1, 1, -1, 1, 2);
+  q.textures = {{{"source", 0}}};
+  q.material = {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}};
+  q.images = {{{"uri", "data:image/png;base64," + base64(png)}, {"name", "bomb"}}};
+  q.write(dir / "bomb.gltf");
+  try {
+    load_gltf(dir / "bomb.gltf");
+    ADD_FAILURE() << "accepted";
+  } catch (const ParseError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("image 0 (bomb) is a broken PNG: its iTXt chunk at byte 33 declares 1852142681 bytes, " +
+                       std::to_string(png.size() - 33 - 12) + " follow"),
+              std::string::npos)
+        << msg;
+  }
+}
+
 /// Every model of the shared data loads; the textured ones, rendered head-on over a grey wall,
 /// show their texture's colours: each covered pixel is within a few levels of a colour of the
 /// texture (as shaded: ambient 1, Lambert), and the rendered colours span the texture's.

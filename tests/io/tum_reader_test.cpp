@@ -98,6 +98,22 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
   reader.seek(1);
   ASSERT_TRUE(reader.next(f));
   EXPECT_EQ(f.index, 1);
+  // a depth PNG with a text chunk declaring 1.85 GB after its header (libpng would allocate that
+  // before reading it): refused with the file, the chunk and its place named
+  std::vector<uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(4, 5, CV_16UC1, cv::Scalar(5000)), png));
+  const std::vector<uint8_t> itxt = {0x6e, 0x65, 0x74, 0x59, 'i', 'T', 'X', 't', 'a'};
+  png.insert(png.begin() + 33, itxt.begin(), itxt.end());
+  std::ofstream(dir / "depth" / "2.png", std::ios::binary).write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+  try {
+    reader.read(2);
+    ADD_FAILURE() << "a broken PNG was read";
+  } catch (const ParseError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find((dir / "depth" / "2.png").string() + ": a broken PNG: its iTXt chunk at byte 33 declares 1852142681 bytes"),
+              std::string::npos)
+        << msg;
+  }
   std::filesystem::remove_all(dir);
 }
 
