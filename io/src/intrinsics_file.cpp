@@ -87,15 +87,15 @@ CameraFile read_json(const std::filesystem::path& path) {
 std::vector<double> numbers(const cv::FileNode& n) {
   std::vector<double> out;
   if (n.isMap()) {
+    // the numbers are read from `data` itself, never through OpenCV's matrix reader: that one
+    // allocates rows x cols as declared before it looks at the data (found by fuzz_intrinsics: a
+    // camera matrix with "rows: +" and a data string asked for 48 GB); a map without a data
+    // sequence gives no numbers, which the caller reports
     const cv::FileNode data = n["data"];
     if (!data.empty() && data.isSeq()) {
       for (const auto& v : data) out.push_back(v.real());
-      return out;
     }
-    cv::Mat m;
-    n >> m;
-    m.convertTo(m, CV_64F);
-    return std::vector<double>(m.begin<double>(), m.end<double>());
+    return out;
   }
   if (n.isSeq()) {
     for (const auto& v : n) out.push_back(v.real());

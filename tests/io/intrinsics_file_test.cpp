@@ -91,6 +91,10 @@ TEST(CameraFile, BrokenFilesNameTheFileAndTheProblem) {
       // found by fuzz_intrinsics: a width beyond int was converted to int (undefined behaviour)
       {"huge_width.yaml", "image_width: 1e308\nimage_height: 240\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [285, 0, 160, 0, 285, 120, 0, 0, 1]\n",
        "image_width 1e+308 is not a whole number in 0..100000"},
+      // found by fuzz_intrinsics: OpenCV's matrix reader allocated rows x cols as declared (48 GB)
+      // before looking at the data, which here is no sequence of numbers
+      {"huge_rows.yaml", "%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 1000000000\n   cols: 3\n   dt: d\n   data: x\n",
+       "camera_matrix: expected 9 numbers (a 3x3 matrix), got 0"},
       {"half_height.yaml", "image_width: 320\nimage_height: 239.5\nK: [285, 0, 160, 0, 285, 120, 0, 0, 1]\n", "image_height 239.5 is not a whole number"},
       {"huge_width.json", R"({ "intrinsic_matrix": [500, 0, 0, 0, 500, 0, 320, 240, 1], "width": 1e300, "height": 480 })",
        "width 1e+300 is not a whole number in 0..100000"},
