@@ -4,7 +4,7 @@
 #   scripts/fuzz.sh [SECONDS_EACH] [HARNESS...]      # default 30 s each, every harness
 #   RUNS=10000000 scripts/fuzz.sh 0 aff              # a campaign: a number of executions instead
 #   LANES=2 scripts/fuzz.sh 30                       # two harnesses at a time (one core each)
-#   DETERMINISTIC=1 LANES=2 scripts/fuzz.sh          # CI: a fixed seed and a fixed number of
+#   SEEDED=1 LANES=2 scripts/fuzz.sh          # CI: a fixed seed and a fixed number of
 #                                                    # executions each (about 30 s on 2 cores)
 #
 # CI runs the seeded form: a fixed seed and a fixed amount of work a harness. libFuzzer still
@@ -40,7 +40,7 @@ dict_of() {
     intrinsics) echo tests/fuzz/dict/intrinsics.dict ;;
   esac
 }
-# executions of the deterministic (CI) run: about 30 s of each harness on a 2-core AMD EPYC with AVX2
+# executions of the seeded (CI) run: about 30 s of each harness on a 2-core AMD EPYC with AVX2
 ci_runs_of() {
   case $1 in
     aff) echo 100000 ;; ppm) echo 500000 ;; gltf) echo 90000 ;; ar_scene) echo 120000 ;;
@@ -55,13 +55,13 @@ fuzz_one() {
   args=(-timeout=10 -rss_limit_mb=2048 -max_len=65536 -print_final_stats=1 -artifact_prefix="$findings/")
   d=$(dict_of "$h")
   [ -n "$d" ] && args+=(-dict="$d")
-  if [ -n "${DETERMINISTIC:-}" ]; then
+  if [ -n "${SEEDED:-}" ]; then
     # a fixed seed and amount of work, with a time cap for a slow machine
     args+=(-seed=1 -runs="$(ci_runs_of "$h")" -max_total_time=120)
   elif [ -n "${RUNS:-}" ]; then args+=(-runs="$RUNS"); else args+=(-max_total_time="$seconds"); fi
   [ -n "${JOBS:-}" ] && args+=(-fork="$JOBS")
   log=build-fuzz/fuzz_$h.log
-  if [ -n "${DETERMINISTIC:-}" ]; then echo "== fuzz_$h (seed 1, $(ci_runs_of "$h") executions)"
+  if [ -n "${SEEDED:-}" ]; then echo "== fuzz_$h (seed 1, $(ci_runs_of "$h") executions)"
   else echo "== fuzz_$h ${RUNS:+($RUNS executions)}${RUNS:-(${seconds} s)}"; fi
   set +e
   ./build-fuzz/tests/fuzz/fuzz_"$h" "${args[@]}" "$work" > "$log" 2>&1
