@@ -31,7 +31,10 @@ constexpr uint32_t kMaxTextureSide = 16384;
 
 /// tinygltf's image hook: PNG and JPEG (and what else OpenCV reads) to 8-bit RGBA.
 bool decode_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int, const unsigned char* bytes,
-                  int size, void*) {
+                  int size, void* deferred) {
+  // an image in a bufferView: tinygltf hands over the view's declared range without checking it
+  // against its buffer, so it is decoded after loading, once the range is checked (load_gltf)
+  if (deferred && image->bufferView >= 0) return true;
   const auto fail = [&](const std::string& what) {
     if (err) *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) + ") " + what + "\n";
     return false;
@@ -220,7 +223,8 @@ ar::Wrap wrap_of(int w) {
 
 GltfModel load_gltf(const std::filesystem::path& path) {
   tinygltf::TinyGLTF loader;
-  loader.SetImageLoader(decode_image, nullptr);
+  int deferred = 1;
+  loader.SetImageLoader(decode_image, &deferred);
   tinygltf::Model m;
   std::string err, warn;
   const std::string file = path.string();
@@ -228,6 +232,23 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   const bool ok = path.extension() == ".glb" ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
                                              : loader.LoadASCIIFromFile(&m, &err, &warn, file);
   if (!ok) throw ParseError(file, 0, 0, "not a readable glTF 2.0 file: " + (err.empty() ? warn : err));
+  // the images in bufferViews, their ranges checked against the buffers that hold them
+  for (size_t i = 0; i < m.images.size(); ++i) {
+    tinygltf::Image& img = m.images[i];
+    if (img.bufferView < 0) continue;
+    const tinygltf::BufferView& v = m.bufferViews.at(static_cast<size_t>(img.bufferView));
+    const size_t held = m.buffers.at(static_cast<size_t>(v.buffer)).data.size();
+    if (v.byteOffset > held || v.byteLength > held - v.byteOffset || v.byteLength > static_cast<size_t>(std::numeric_limits<int>::max())) {
+      throw ParseError(file, 0, 0, "image " + std::to_string(i) + ": its bufferView " + std::to_string(img.bufferView) + " (bytes " +
+                                       std::to_string(v.byteOffset) + " + " + std::to_string(v.byteLength) + ") runs past its buffer's " +
+                                       std::to_string(held) + " bytes");
+    }
+    std::string image_err;
+    if (!decode_image(&img, static_cast<int>(i), &image_err, nullptr, 0, 0, m.buffers[static_cast<size_t>(v.buffer)].data.data() + v.byteOffset,
+                      static_cast<int>(v.byteLength), nullptr)) {
+      throw ParseError(file, 0, 0, "not a readable glTF 2.0 file: " + image_err);
+    }
+  }
   const Reader r(m, file);
   GltfModel out;
   out.file = path;

@@ -488,6 +488,19 @@ TEST(GltfImages, PngChunkRunningPastTheDataIsRefusedBeforeDecoding) {
       << msg;
 }
 
+// Found by fuzzing: an image's bufferView reaching past its buffer, whose declared range tinygltf
+// hands to the image decoder unchecked (a read past the buffer). Refused, naming the view.
+TEST(GltfImages, ImageBufferViewPastItsBufferIsRefused) {
+  const auto glb = std::filesystem::path(ARTRACE_SOURCE_DIR) / "tests/fuzz/corpus/gltf/regress-image-bufferview-past-buffer.glb";
+  try {
+    load_gltf(glb);
+    ADD_FAILURE() << "accepted";
+  } catch (const ParseError& e) {
+    EXPECT_NE(std::string(e.what()).find("image 0: its bufferView 3 (bytes 840 + 23516) runs past its buffer's 24330 bytes"), std::string::npos)
+        << e.what();
+  }
+}
+
 /// Every model of the shared data loads; the textured ones, rendered head-on over a grey wall,
 /// show their texture's colours: each covered pixel is within a few levels of a colour of the
 /// texture (as shaded: ambient 1, Lambert), and the rendered colours span the texture's.
