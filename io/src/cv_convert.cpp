@@ -97,6 +97,16 @@ std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
   return std::nullopt;
 }
 
+std::string image_header_error(const uint8_t* data, size_t size) {
+  if (const std::string bad = png_chunk_error(data, size); !bad.empty()) return "is a broken PNG: " + bad;
+  const std::optional<ImageSize> declared = declared_image_size(data, size);
+  if (declared && (declared->width == 0 || declared->height == 0 || declared->width > kMaxImageSide || declared->height > kMaxImageSide)) {
+    return "declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) + " pixels (images of 1 to " +
+           std::to_string(kMaxImageSide) + " pixels a side are read)";
+  }
+  return "";
+}
+
 cv::Mat read_image_file(const std::filesystem::path& path, int flags) {
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) return cv::Mat();
@@ -105,13 +115,7 @@ cv::Mat read_image_file(const std::filesystem::path& path, int flags) {
   std::vector<uint8_t> bytes(static_cast<size_t>(size));
   in.seekg(0);
   if (!in.read(reinterpret_cast<char*>(bytes.data()), size)) return cv::Mat();
-  if (const std::string bad = png_chunk_error(bytes.data(), bytes.size()); !bad.empty()) {
-    throw ParseError(path.string(), 0, 0, "a broken PNG: " + bad);
-  }
-  if (const auto declared = declared_image_size(bytes.data(), bytes.size()); declared && (declared->width > 16384 || declared->height > 16384)) {
-    throw ParseError(path.string(), 0, 0, "the image declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) +
-                                              " pixels (images of up to 16384 a side are read)");
-  }
+  if (const std::string bad = image_header_error(bytes.data(), bytes.size()); !bad.empty()) throw ParseError(path.string(), 0, 0, "the image " + bad);
   return cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<uint8_t*>(bytes.data())), flags);
 }
 

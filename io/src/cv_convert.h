@@ -29,6 +29,12 @@ std::optional<ImageSize> declared_image_size(const uint8_t* data, size_t size);
 /// which libpng would allocate for before reading), or "" when every chunk up to IEND fits. ""
 /// for other formats.
 std::string png_chunk_error(const uint8_t* data, size_t size);
+/// The largest image side the readers take (GPUs' usual texture limit).
+constexpr uint32_t kMaxImageSide = 16384;
+/// What is wrong with an image's header before OpenCV may decode it ("is a broken PNG: ..." for a
+/// chunk running past the data, "declares WxH pixels ..." for a side of 0 or beyond kMaxImageSide);
+/// "" when nothing is (including formats whose header this does not read).
+std::string image_header_error(const uint8_t* data, size_t size);
 /// An image file decoded by OpenCV (`flags` as cv::imread's), after its header is checked: a PNG
 /// whose chunks run past the file, or a PNG or JPEG declaring more than 16384 pixels a side, is a
 /// ParseError naming the file (OpenCV would allocate for the declared size first). Empty when the

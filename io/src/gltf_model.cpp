@@ -15,7 +15,6 @@
 #include <cstring>
 #include <functional>
 #include <limits>
-#include <optional>
 #include <set>
 #include <sstream>
 
@@ -25,9 +24,6 @@ namespace {
 /// The extensions this reader implements (others, when required, make the file unreadable).
 const std::set<std::string> kSupported = {"KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_emissive_strength",
                                           "KHR_materials_transmission", "KHR_materials_ior"};
-
-/// The largest texture side read (as GPUs' usual limit); larger declared sizes are refused.
-constexpr uint32_t kMaxTextureSide = 16384;
 
 /// tinygltf's image hook: PNG and JPEG (and what else OpenCV reads) to 8-bit RGBA.
 bool decode_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int, const unsigned char* bytes,
@@ -39,25 +35,13 @@ bool decode_image(tinygltf::Image* image, const int index, std::string* err, std
     if (err) *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) + ") " + what + "\n";
     return false;
   };
-  // glTF images are PNG or JPEG (WebP with EXT_texture_webp); the size a header declares is checked
-  // before anything is allocated for it
-  const std::optional<ImageSize> declared = size > 0 ? declared_image_size(bytes, static_cast<size_t>(size)) : std::nullopt;
-  if (!declared) return fail("is not a PNG, JPEG or WebP image");
-  if (declared->width == 0 || declared->height == 0 || declared->width > kMaxTextureSide || declared->height > kMaxTextureSide) {
-    return fail("declares " + std::to_string(declared->width) + "x" + std::to_string(declared->height) + " pixels (textures of 1 to " +
-                std::to_string(kMaxTextureSide) + " pixels a side are read)");
-  }
-  // a PNG chunk whose length runs past the data would have libpng allocate that length first
-  if (const std::string bad = png_chunk_error(bytes, static_cast<size_t>(size)); !bad.empty()) return fail("is a broken PNG: " + bad);
+  // glTF images are PNG or JPEG (WebP with EXT_texture_webp); their headers are checked before
+  // OpenCV allocates for what they declare
+  if (size <= 0 || !declared_image_size(bytes, static_cast<size_t>(size))) return fail("is not a PNG, JPEG or WebP image");
+  if (const std::string bad = image_header_error(bytes, static_cast<size_t>(size)); !bad.empty()) return fail(bad);
   const cv::Mat buf(1, size, CV_8UC1, const_cast<unsigned char*>(bytes));
   cv::Mat m = cv::imdecode(buf, cv::IMREAD_UNCHANGED);
-  if (m.empty()) {
-    if (err) {
-      *err += "image " + std::to_string(index) + " (" + (image->name.empty() ? image->uri : image->name) +
-              ") cannot be decoded (its header is sound, its data is not)\n";
-    }
-    return false;
-  }
+  if (m.empty()) return fail("cannot be decoded (its header is sound, its data is not)");
   if (m.depth() == CV_16U) m.convertTo(m, CV_8U, 1.0 / 257.0);
   if (m.depth() != CV_8U) m.convertTo(m, CV_8U);
   cv::Mat rgba;

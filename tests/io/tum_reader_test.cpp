@@ -110,7 +110,7 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
     ADD_FAILURE() << "a broken PNG was read";
   } catch (const ParseError& e) {
     const std::string msg = e.what();
-    EXPECT_NE(msg.find((dir / "depth" / "2.png").string() + ": a broken PNG: its iTXt chunk at byte 33 declares 1852142681 bytes"),
+    EXPECT_NE(msg.find((dir / "depth" / "2.png").string() + ": the image is a broken PNG: its iTXt chunk at byte 33 declares 1852142681 bytes"),
               std::string::npos)
         << msg;
   }
