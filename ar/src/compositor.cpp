@@ -174,9 +174,11 @@ struct Shader {
 
   /// What a secondary ray sees, given its closest virtual hit `h` and real-scene hit: the virtual
   /// surfaces in front of the real one, blended front to back, then the recorded colour.
-  glm::vec3 seen(const core::Ray& r, const core::Hit& h, bool real_hit, float t_real, const glm::vec3& real, int depth, float path) const {
+  /// With `d`, the rays of the next generation are left to it, as in radiance().
+  glm::vec3 seen(const core::Ray& r, const core::Hit& h, bool real_hit, float t_real, const glm::vec3& real, int depth, float path,
+                 Deferred* d = nullptr, const glm::vec3& weight = glm::vec3(1.0f)) const {
     if (h.valid() && (!real_hit || h.t <= t_real)) {
-      const Sample s = radiance(r, h, depth, path);
+      const Sample s = radiance(r, h, depth, path, d, weight);
       if (s.coverage >= 1.0f) return s.colour;
       return s.colour + (1.0f - s.coverage) * (real_hit ? real : background(r.org, r.dir));
     }
@@ -318,8 +320,28 @@ struct Shader {
     return c;
   }
 
-  /// Traces what `d` holds, 16 rays a packet, and adds it to the pixels of `colour`.
+  /// Traces what `d` holds, 16 rays a packet, and adds it to the pixels of `colour`: the shadow
+  /// rays, then the secondary rays, whose hits leave the next generation's rays to another list
+  /// (with opt.packet_generations), traced in its turn, until a generation leaves none. `d` is
+  /// used up.
   void resolve(Deferred& d, std::vector<glm::vec3>& colour) const {
+    thread_local Deferred next_scratch;
+    Deferred& next = next_scratch;  // a worker's own (resolve runs inside one tile at a time)
+    Deferred* now = &d;
+    Deferred* later = &next;
+    for (;;) {
+      later->clear(lights.size());
+      resolve_generation(*now, colour, opt.packet_generations ? later : nullptr);
+      bool more = false;
+      for (const auto& l : later->lights) more = more || !l.empty();
+      for (const auto& v : later->secondary) more = more || !v.empty();
+      if (!more) return;
+      std::swap(now, later);
+    }
+  }
+
+  /// One generation of resolve(); the next one's rays go to `next` (null: traced now, one at a time).
+  void resolve_generation(Deferred& d, std::vector<glm::vec3>& colour, Deferred* next) const {
     core::RayPacket rays{};
     float pass[core::kPacketSize];
     for (auto& list : d.lights) {
@@ -343,7 +365,8 @@ struct Shader {
         const core::LaneMask real_hits = proxy ? proxy->intersect(rays, mask, t_real, real) : 0u;
         for (int i = 0; i < n; ++i) {
           const Deferred::Secondary& s = list[at + i];
-          colour[s.pixel] += s.weight * seen(rays.get(i), hits.get(i), (real_hits >> i) & 1u, t_real[i], real[i], s.depth, s.path);
+          if (next) next->pixel = s.pixel;
+          colour[s.pixel] += s.weight * seen(rays.get(i), hits.get(i), (real_hits >> i) & 1u, t_real[i], real[i], s.depth, s.path, next, s.weight);
         }
       }
     }
@@ -565,6 +588,7 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
       float cosine, dist;
       core::Ray ray;
       float pass;
+      bool real_blocked;  ///< the real scene lies between the point and the light
     };
     thread_local std::vector<Point> points;
     thread_local std::vector<std::vector<Shadow>> shadows;  // per light
@@ -605,7 +629,7 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
           if (!(dist > 0.0f)) continue;
           const float cosine = glm::dot(n, n) > 0.0f ? glm::dot(n, to / dist) : 1.0f;
           if (cosine <= 0.0f) continue;
-          Shadow sh{k, cosine, dist, core::Ray{}, 1.0f};
+          Shadow sh{k, cosine, dist, core::Ray{}, 1.0f, false};
           if (meets_virtual(x, y, li, p, to)) {
             const glm::vec3 o = core::offset_ray_origin(p, glm::dot(n, n) > 0.0f ? n : to / dist);
             sh.ray = core::Ray{o, lights[li].position - o, 0.0f, 1.0f};
@@ -636,6 +660,30 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
       }
       flush();
     }
+    // where a virtual object takes light, whether the real scene took it already (from kRealSkip
+    // off the point towards the light), in packets too
+    if (proxy && !proxy->empty()) {
+      for (size_t li = 0; li < shadows.size(); ++li) {
+        std::vector<Shadow>& list = shadows[li];
+        int n = 0;
+        auto flush = [&] {
+          if (n == 0) return;
+          const core::LaneMask hit = proxy->scene().occluded(packet, (1u << n) - 1u);
+          for (int i = 0; i < n; ++i) list[lane_of[i]].real_blocked = (hit >> i) & 1u;
+          n = 0;
+        };
+        for (uint32_t k = 0; k < list.size(); ++k) {
+          const Shadow& sh = list[k];
+          if (!(sh.pass < 1.0f) || !(sh.dist > kRealSkip)) continue;
+          const glm::vec3 p = points[sh.point].p;
+          const glm::vec3 l_dir = (lights[li].position - p) / sh.dist;
+          packet.set(n, core::Ray{p + kRealSkip * l_dir, l_dir, 0.0f, sh.dist - kRealSkip});
+          lane_of[n++] = k;
+          if (n == core::kPacketSize) flush();
+        }
+        flush();
+      }
+    }
     // the factors: (ambient + light reaching the point) / (ambient + light that would reach it)
     thread_local std::vector<glm::vec3> all, lit;
     thread_local std::vector<uint8_t> blocked;
@@ -645,15 +693,8 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
     for (size_t li = 0; li < shadows.size(); ++li) {
       const VirtualLight& l = lights[li];
       for (const Shadow& sh : shadows[li]) {
-        const Point& pt = points[sh.point];
+        if (sh.real_blocked) continue;  // the real scene already shadows this point from this light
         all[sh.point] += l.color * sh.cosine;
-        if (sh.pass < 1.0f && proxy && !proxy->empty() && sh.dist > kRealSkip) {
-          const glm::vec3 l_dir = (l.position - pt.p) / sh.dist;
-          if (proxy->scene().occluded(core::Ray{pt.p + kRealSkip * l_dir, l_dir, 0.0f, sh.dist - kRealSkip})) {
-            all[sh.point] -= l.color * sh.cosine;  // the real scene already shadows this point from this light
-            continue;
-          }
-        }
         blocked[sh.point] |= sh.pass < 1.0f;
         lit[sh.point] += l.color * (sh.cosine * sh.pass);
       }

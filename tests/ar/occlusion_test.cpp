@@ -170,6 +170,62 @@ TEST(Occlusion, OnePixelColourDepthOffsetIsCorrected) {
 }
 
 
+/// The colour-guided refinement against its definition, worked out pixel by pixel: a virtual pixel
+/// whose 7x7 window holds an alpha more than 0.01 off its own takes the mean of the window's
+/// virtual pixels' alphas, weighted by colour likeness and distance; every other keeps its alpha.
+/// Random depth steps, colours, holes and virtual coverage, the window clipped at the borders.
+TEST(Occlusion, RefinementMatchesItsDefinitionPixelByPixel) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int round = 0; round < 4; ++round) {
+    DepthImage depth = plane(2.0f);
+    ColorImage color = uniform(0, 0, 0);
+    std::vector<float> zv(kW * kH, kNone);
+    for (int i = 0; i < kW * kH; ++i) {
+      const int x = i % kW, y = i / kW;
+      depth.depth_m[i] = (x + 3 * y + 11 * round) % 37 < 15 ? 1.0f + 0.01f * u(rng) : 2.5f + 0.01f * u(rng);
+      if (u(rng) < 0.03f) depth.depth_m[i] = 0.0f;
+      for (int c = 0; c < 3; ++c) color.rgb[3 * i + c] = static_cast<uint8_t>(u(rng) < 0.5f ? 40 + 20 * u(rng) : 200 + 20 * u(rng));
+      if (u(rng) < 0.9f && x > 2 + round) zv[i] = 1.2f + 1.6f * u(rng) * (x < kW / 2 ? 1.0f : 0.5f);
+      // in the lower half, virtual surfaces within the soft band of the real one: alphas between 0
+      // and 1 that differ from their neighbours' by every amount, around the 0.01 that counts
+      if (y >= kH / 2 && depth.depth_m[i] > 0.0f && std::isfinite(zv[i])) zv[i] = depth.depth_m[i] + 0.001f * (u(rng) - 0.5f);
+    }
+    OcclusionOptions plain;
+    plain.refine = false;
+    const OcclusionOptions o;
+    const std::vector<float> a = occlusion_alpha_filled(depth, color, zv, plain);
+    const std::vector<float> refined = occlusion_alpha_filled(depth, color, zv, o);
+    const int r = o.guide_radius;
+    int mixed = 0;
+    for (int y = 0; y < kH; ++y) {
+      for (int x = 0; x < kW; ++x) {
+        const int i = y * kW + x;
+        bool off = false;
+        double sum = 0.0, wsum = 0.0;
+        for (int yy = std::max(0, y - r); yy <= std::min(kH - 1, y + r); ++yy) {
+          for (int xx = std::max(0, x - r); xx <= std::min(kW - 1, x + r); ++xx) {
+            const int j = yy * kW + xx;
+            off = off || std::fabs(a[j] - a[i]) > 0.01f;
+            if (!std::isfinite(zv[j])) continue;
+            double dc = 0.0;
+            for (int c = 0; c < 3; ++c) dc += std::pow(color.rgb[3 * i + c] - color.rgb[3 * j + c], 2);
+            const double wt = std::exp(-dc / (2.0 * o.guide_sigma_color * o.guide_sigma_color) -
+                                       ((xx - x) * (xx - x) + (yy - y) * (yy - y)) / (2.0 * o.guide_sigma_space * o.guide_sigma_space));
+            sum += wt * a[j];
+            wsum += wt;
+          }
+        }
+        const bool refine = std::isfinite(zv[i]) && off && wsum > 0.0;
+        mixed += refine;
+        ASSERT_NEAR(refined[i], refine ? sum / wsum : a[i], 1e-5) << "round " << round << " pixel " << x << "," << y;
+      }
+    }
+    EXPECT_GT(mixed, kW * kH / 10) << "round " << round;
+    EXPECT_LT(mixed, kW * kH * 9 / 10) << "round " << round;
+  }
+}
+
 /// Masks for the metric tests: a virtual surface covering columns [8, 56) of every row.
 std::vector<uint8_t> columns(int x0, int x1) {
   std::vector<uint8_t> m(kW * kH, 0);

@@ -102,6 +102,10 @@ struct CompositeOptions {
   /// points, and shadow rays ask the material at every surface they cross.
   bool alpha_tested = false;
   int threads = 0;
+  /// Secondary rays (reflection, refraction) and the shadow rays at their hits are traced in
+  /// packets, one generation after the other. Off: only the first generation goes in packets and
+  /// the later ones are traced one ray at a time (the reference the packets are tested against).
+  bool packet_generations = true;
   /// Keep the occlusion's visibility and the virtual depth of every pixel in the stats (tests,
   /// benchmarks).
   bool keep_visibility = false;
