@@ -77,7 +77,26 @@ float component(const unsigned char* q, int ctype, bool normalized) {
 
 class Reader {
  public:
-  Reader(const tinygltf::Model& m, const std::string& file) : m_(m), file_(file) {}
+  Reader(const tinygltf::Model& m, const std::string& file) : m_(m), file_(file) {
+    // An accessor without a bufferView is zeros (with sparse values, perhaps): nothing in the file
+    // backs its count, which alone would decide an allocation (fuzz_gltf: a 500-byte file declaring
+    // 100 million positions asked for 1.2 GB). It may have as many elements as the largest accessor
+    // whose elements the file does hold (a sparse morph target has its mesh's vertex count), and
+    // at least kUnbackedElements.
+    for (const tinygltf::Accessor& a : m_.accessors) {
+      if (a.bufferView < 0 || a.bufferView >= static_cast<int>(m_.bufferViews.size())) continue;
+      const tinygltf::BufferView& v = m_.bufferViews[static_cast<size_t>(a.bufferView)];
+      if (v.buffer < 0 || v.buffer >= static_cast<int>(m_.buffers.size())) continue;
+      const size_t held = m_.buffers[static_cast<size_t>(v.buffer)].data.size();
+      const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
+      const int n = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
+      if (csize <= 0 || n <= 0 || v.byteOffset > held || a.byteOffset > held - v.byteOffset) continue;
+      const size_t elem = static_cast<size_t>(csize) * n, stride = v.byteStride ? v.byteStride : elem;
+      const size_t bytes = std::min(v.byteLength, held - v.byteOffset);
+      const size_t fit = bytes >= a.byteOffset + elem ? (bytes - a.byteOffset - elem) / stride + 1 : 0;
+      unbacked_limit_ = std::max(unbacked_limit_, std::min(a.count, fit));
+    }
+  }
 
   [[noreturn]] void fail(const std::string& what) const { throw ParseError(file_, 0, 0, what); }
 
@@ -95,6 +114,14 @@ class Reader {
     return b.data.data() + start;
   }
 
+  /// An accessor without a bufferView may have at most unbacked_limit_ elements.
+  void check_unbacked(size_t count, const std::string& acc) const {
+    if (count > unbacked_limit_) {
+      fail(acc + " declares " + std::to_string(count) + " elements and no bufferView to hold them (at most " + std::to_string(unbacked_limit_) +
+           ", the most any accessor with data in this file has, or " + std::to_string(kUnbackedElements) + ")");
+    }
+  }
+
   /// Accessor `index` as `comps` floats per element (normalised integers converted), with its
   /// sparse substitutes applied. Non-finite floats are an error.
   std::vector<float> floats(int index, int comps, const std::string& what) const {
@@ -106,6 +133,19 @@ class Reader {
     const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
     if (csize <= 0) fail(acc + ": unsupported component type " + std::to_string(a.componentType));
     if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " elements");
+    const size_t elem = static_cast<size_t>(csize) * n;
+    // the data checked before anything is allocated for it
+    const unsigned char* data = nullptr;
+    size_t stride = elem;
+    if (a.bufferView >= 0) {
+      const int view = a.bufferView;
+      if (view < static_cast<int>(m_.bufferViews.size()) && m_.bufferViews[static_cast<size_t>(view)].byteStride) {
+        stride = m_.bufferViews[static_cast<size_t>(view)].byteStride;
+      }
+      data = span(view, a.byteOffset, a.count, elem, stride, acc);
+    } else {
+      check_unbacked(a.count, acc);
+    }
     std::vector<float> out(a.count * static_cast<size_t>(n), 0.0f);
     auto read_into = [&](const unsigned char* p, size_t stride, size_t count, const std::vector<size_t>* dst) {
       for (size_t i = 0; i < count; ++i) {
@@ -117,12 +157,7 @@ class Reader {
         }
       }
     };
-    if (a.bufferView >= 0) {
-      const tinygltf::BufferView& v = m_.bufferViews.at(static_cast<size_t>(a.bufferView));
-      const size_t elem = static_cast<size_t>(csize) * n;
-      const size_t stride = v.byteStride ? v.byteStride : elem;
-      read_into(span(a.bufferView, a.byteOffset, a.count, elem, stride, acc), stride, a.count, nullptr);
-    }
+    if (data) read_into(data, stride, a.count, nullptr);
     if (a.sparse.isSparse) {
       const auto& sp = a.sparse;
       if (sp.count < 0 || static_cast<size_t>(sp.count) > a.count) fail(acc + ": sparse count " + std::to_string(sp.count) + " out of range");
@@ -137,7 +172,6 @@ class Reader {
         if (k >= a.count) fail(acc + ": sparse index " + std::to_string(k) + " past its " + std::to_string(a.count) + " elements");
         where[i] = k;
       }
-      const size_t elem = static_cast<size_t>(csize) * n;
       read_into(span(sp.values.bufferView, static_cast<size_t>(sp.values.byteOffset), where.size(), elem, elem, acc + " sparse values"), elem,
                 where.size(), &where);
     }
@@ -155,11 +189,18 @@ class Reader {
       fail(acc + ": indices must be unsigned 8, 16 or 32-bit scalars");
     }
     if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " indices");
-    std::vector<uint32_t> out(a.count, 0);
+    const unsigned char* p = nullptr;
+    size_t stride = static_cast<size_t>(csize);
     if (a.bufferView >= 0) {
-      const tinygltf::BufferView& v = m_.bufferViews.at(static_cast<size_t>(a.bufferView));
-      const size_t stride = v.byteStride ? v.byteStride : static_cast<size_t>(csize);
-      const unsigned char* p = span(a.bufferView, a.byteOffset, a.count, static_cast<size_t>(csize), stride, acc);
+      if (a.bufferView < static_cast<int>(m_.bufferViews.size()) && m_.bufferViews[static_cast<size_t>(a.bufferView)].byteStride) {
+        stride = m_.bufferViews[static_cast<size_t>(a.bufferView)].byteStride;
+      }
+      p = span(a.bufferView, a.byteOffset, a.count, static_cast<size_t>(csize), stride, acc);
+    } else {
+      check_unbacked(a.count, acc);
+    }
+    std::vector<uint32_t> out(a.count, 0);
+    if (p) {
       for (size_t i = 0; i < a.count; ++i) {
         uint32_t k = 0;
         std::memcpy(&k, p + i * stride, static_cast<size_t>(csize));
@@ -175,8 +216,10 @@ class Reader {
   }
 
  private:
+  static constexpr size_t kUnbackedElements = 65536;
   const tinygltf::Model& m_;
   std::string file_;
+  size_t unbacked_limit_ = kUnbackedElements;
 };
 
 /// A number of the glTF JSON as a float; one beyond the float range (or not finite) is an error.
