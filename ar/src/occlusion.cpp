@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 namespace artrace::ar {
@@ -94,10 +95,26 @@ std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorI
   const int r = opt.guide_radius;
   const double inv_c = 1.0 / (2.0 * opt.guide_sigma_color * opt.guide_sigma_color);
   const double inv_s = 1.0 / (2.0 * opt.guide_sigma_space * opt.guide_sigma_space);
+  // Runs of equal alphas along each row: where every row of a pixel's window lies inside a run of
+  // its own alpha, nothing in the window differs and the scan below is skipped (the common case:
+  // alpha 0 or 1 all around)
+  std::vector<int32_t> run_start(alpha.size()), run_end(alpha.size());
+  for (int y = 0; y < h; ++y) {
+    const size_t row = static_cast<size_t>(y) * w;
+    for (int x = 0; x < w; ++x) run_start[row + x] = x > 0 && alpha[row + x] == alpha[row + x - 1] ? run_start[row + x - 1] : x;
+    for (int x = w - 1; x >= 0; --x) run_end[row + x] = x + 1 < w && alpha[row + x] == alpha[row + x + 1] ? run_end[row + x + 1] : x + 1;
+  }
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const size_t i = static_cast<size_t>(y) * w + x;
       if (!std::isfinite(zv[i])) continue;
+      const int lo = std::max(0, x - r), hi = std::min(w - 1, x + r);
+      bool uniform = true;
+      for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r) && uniform; ++yy) {
+        const size_t j = static_cast<size_t>(yy) * w + x;
+        uniform = alpha[j] == alpha[i] && run_start[j] <= lo && run_end[j] > hi;
+      }
+      if (uniform) continue;
       bool mixed = false;
       for (int dy = -r; dy <= r && !mixed; ++dy) {
         for (int dx = -r; dx <= r; ++dx) {

@@ -177,11 +177,17 @@ TEST(Occlusion, OnePixelColourDepthOffsetIsCorrected) {
 TEST(Occlusion, RefinementMatchesItsDefinitionPixelByPixel) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  for (int round = 0; round < 4; ++round) {
+  for (int round = 0; round < 5; ++round) {
     DepthImage depth = plane(2.0f);
     ColorImage color = uniform(0, 0, 0);
     std::vector<float> zv(kW * kH, kNone);
-    for (int i = 0; i < kW * kH; ++i) {
+    for (int i = 0; i < kW * kH && round == 4; ++i) {
+      // the last round: a real step at x = 30 in front of a virtual wall, one colour: alphas of 0
+      // and 1 in straight columns, so a window's edge column alone can differ from the rest
+      depth.depth_m[i] = i % kW < 30 ? 1.0f : 3.0f;
+      zv[i] = 2.0f;
+    }
+    for (int i = 0; i < kW * kH && round < 4; ++i) {
       const int x = i % kW, y = i / kW;
       depth.depth_m[i] = (x + 3 * y + 11 * round) % 37 < 15 ? 1.0f + 0.01f * u(rng) : 2.5f + 0.01f * u(rng);
       if (u(rng) < 0.03f) depth.depth_m[i] = 0.0f;
@@ -221,8 +227,12 @@ TEST(Occlusion, RefinementMatchesItsDefinitionPixelByPixel) {
         ASSERT_NEAR(refined[i], refine ? sum / wsum : a[i], 1e-5) << "round " << round << " pixel " << x << "," << y;
       }
     }
-    EXPECT_GT(mixed, kW * kH / 10) << "round " << round;
-    EXPECT_LT(mixed, kW * kH * 9 / 10) << "round " << round;
+    if (round == 4) {
+      EXPECT_EQ(mixed, 6 * kH) << "the three columns either side of the step, in every row";
+    } else {
+      EXPECT_GT(mixed, kW * kH / 10) << "round " << round;
+      EXPECT_LT(mixed, kW * kH * 9 / 10) << "round " << round;
+    }
   }
 }
 
