@@ -20,6 +20,9 @@
 # on the first crash, leak, sanitizer report or hang (> 10 s on one input). The crashing input is
 # kept as build-fuzz/findings/<reader>/crash-*; make it a regression test, fix, and run again.
 # A summary line per harness (executions, executions/s, coverage) goes to build-fuzz/fuzz-summary.txt.
+# The whole script is one block, read before it runs: a campaign runs for hours, and bash reads a
+# script as it goes, so an edit made meanwhile would otherwise change what the running one does.
+{
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-30}
@@ -94,3 +97,4 @@ for h in "${harnesses[@]}"; do
 done
 while (( running > 0 )); do wait -n || status=1; running=$((running - 1)); done
 exit $status
+}
