@@ -76,7 +76,8 @@ std::optional<Plane> fit_plane(const std::vector<Eigen::Vector3d>& pts, const Ra
     size_t count = 0;
     double cost = 0.0;
     for (const Eigen::Vector3d& q : pts) {
-      const double d2 = p.distance(q) * p.distance(q);
+      const double d = p.distance(q);
+      const double d2 = d * d;
       count += d2 <= t2;
       cost += std::min(d2, t2);
     }
