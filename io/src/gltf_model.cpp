@@ -75,6 +75,16 @@ float component(const unsigned char* q, int ctype, bool normalized) {
   }
 }
 
+/// Whether `count` elements of `elem` bytes, `stride` apart (stride >= elem > 0), from `offset`
+/// into bufferView `v` lie inside both the view and `held`, the size of its buffer; nothing here
+/// can wrap around, whatever the file declares.
+bool view_holds(const tinygltf::BufferView& v, size_t held, size_t offset, size_t count, size_t elem, size_t stride) {
+  if (v.byteOffset > held || offset > held - v.byteOffset || offset > v.byteLength) return false;
+  if (count == 0) return true;
+  const size_t room = std::min(held - v.byteOffset - offset, v.byteLength - offset);
+  return elem <= room && count - 1 <= (room - elem) / stride;
+}
+
 class Reader {
  public:
   Reader(const tinygltf::Model& m, const std::string& file) : m_(m), file_(file) {
@@ -87,16 +97,20 @@ class Reader {
       if (a.bufferView < 0 || a.bufferView >= static_cast<int>(m_.bufferViews.size())) continue;
       const tinygltf::BufferView& v = m_.bufferViews[static_cast<size_t>(a.bufferView)];
       if (v.buffer < 0 || v.buffer >= static_cast<int>(m_.buffers.size())) continue;
-      const size_t held = m_.buffers[static_cast<size_t>(v.buffer)].data.size();
-      const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
-      const int n = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
-      if (csize <= 0 || n <= 0 || v.byteOffset > held || a.byteOffset > held - v.byteOffset) continue;
-      const size_t elem = static_cast<size_t>(csize) * n, stride = v.byteStride ? v.byteStride : elem;
-      const size_t bytes = std::min(v.byteLength, held - v.byteOffset);
-      const size_t fit = bytes >= a.byteOffset + elem ? (bytes - a.byteOffset - elem) / stride + 1 : 0;
-      unbacked_limit_ = std::max(unbacked_limit_, std::min(a.count, fit));
+      const size_t elem = element_bytes(a);
+      if (elem > 0 && view_holds(v, m_.buffers[static_cast<size_t>(v.buffer)].data.size(), a.byteOffset, a.count, elem, stride_of(v, elem))) {
+        unbacked_limit_ = std::max(unbacked_limit_, a.count);
+      }
     }
   }
+
+  /// An accessor element's bytes; 0 for an unknown component type or element type.
+  static size_t element_bytes(const tinygltf::Accessor& a) {
+    const int csize = tinygltf::GetComponentSizeInBytes(static_cast<uint32_t>(a.componentType));
+    const int n = tinygltf::GetNumComponentsInType(static_cast<uint32_t>(a.type));
+    return csize > 0 && n > 0 ? static_cast<size_t>(csize) * static_cast<size_t>(n) : 0;
+  }
+  static size_t stride_of(const tinygltf::BufferView& v, size_t elem) { return v.byteStride ? v.byteStride : elem; }
 
   [[noreturn]] void fail(const std::string& what) const { throw ParseError(file_, 0, 0, what); }
 
@@ -107,19 +121,24 @@ class Reader {
     const tinygltf::BufferView& v = m_.bufferViews[static_cast<size_t>(view)];
     if (v.buffer < 0 || v.buffer >= static_cast<int>(m_.buffers.size())) fail(what + ": its bufferView names a buffer that does not exist");
     const tinygltf::Buffer& b = m_.buffers[static_cast<size_t>(v.buffer)];
-    const size_t start = v.byteOffset + offset;
-    if (count > 0 && (start + stride * (count - 1) + elem > b.data.size() || offset + stride * (count - 1) + elem > v.byteLength)) {
-      fail(what + " runs past the end of its buffer");
-    }
-    return b.data.data() + start;
+    if (!view_holds(v, b.data.size(), offset, count, elem, stride)) fail(what + " runs past the end of its buffer");
+    return b.data.data() + v.byteOffset + offset;
   }
 
-  /// An accessor without a bufferView may have at most unbacked_limit_ elements.
-  void check_unbacked(size_t count, const std::string& acc) const {
-    if (count > unbacked_limit_) {
-      fail(acc + " declares " + std::to_string(count) + " elements and no bufferView to hold them (at most " + std::to_string(unbacked_limit_) +
-           ", the most any accessor with data in this file has, or " + std::to_string(kUnbackedElements) + ")");
+  /// An accessor's data, checked before anything is allocated for it, and its elements' stride:
+  /// the bytes in its bufferView, or null for one without (zeros, perhaps with sparse values),
+  /// which may have at most unbacked_limit_ elements.
+  const unsigned char* data_of(const tinygltf::Accessor& a, size_t elem, size_t& stride, const std::string& acc) const {
+    stride = elem;
+    if (a.bufferView < 0) {
+      if (a.count > unbacked_limit_) {
+        fail(acc + " declares " + std::to_string(a.count) + " elements and no bufferView to hold them (at most " +
+             std::to_string(unbacked_limit_) + ", the most any accessor with data in this file has, or " + std::to_string(kUnbackedElements) + ")");
+      }
+      return nullptr;
     }
+    if (a.bufferView < static_cast<int>(m_.bufferViews.size())) stride = stride_of(m_.bufferViews[static_cast<size_t>(a.bufferView)], elem);
+    return span(a.bufferView, a.byteOffset, a.count, elem, stride, acc);
   }
 
   /// Accessor `index` as `comps` floats per element (normalised integers converted), with its
@@ -134,18 +153,8 @@ class Reader {
     if (csize <= 0) fail(acc + ": unsupported component type " + std::to_string(a.componentType));
     if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " elements");
     const size_t elem = static_cast<size_t>(csize) * n;
-    // the data checked before anything is allocated for it
-    const unsigned char* data = nullptr;
     size_t stride = elem;
-    if (a.bufferView >= 0) {
-      const int view = a.bufferView;
-      if (view < static_cast<int>(m_.bufferViews.size()) && m_.bufferViews[static_cast<size_t>(view)].byteStride) {
-        stride = m_.bufferViews[static_cast<size_t>(view)].byteStride;
-      }
-      data = span(view, a.byteOffset, a.count, elem, stride, acc);
-    } else {
-      check_unbacked(a.count, acc);
-    }
+    const unsigned char* data = data_of(a, elem, stride, acc);
     std::vector<float> out(a.count * static_cast<size_t>(n), 0.0f);
     auto read_into = [&](const unsigned char* p, size_t stride, size_t count, const std::vector<size_t>* dst) {
       for (size_t i = 0; i < count; ++i) {
@@ -189,16 +198,8 @@ class Reader {
       fail(acc + ": indices must be unsigned 8, 16 or 32-bit scalars");
     }
     if (a.count > (1u << 28)) fail(acc + ": " + std::to_string(a.count) + " indices");
-    const unsigned char* p = nullptr;
     size_t stride = static_cast<size_t>(csize);
-    if (a.bufferView >= 0) {
-      if (a.bufferView < static_cast<int>(m_.bufferViews.size()) && m_.bufferViews[static_cast<size_t>(a.bufferView)].byteStride) {
-        stride = m_.bufferViews[static_cast<size_t>(a.bufferView)].byteStride;
-      }
-      p = span(a.bufferView, a.byteOffset, a.count, static_cast<size_t>(csize), stride, acc);
-    } else {
-      check_unbacked(a.count, acc);
-    }
+    const unsigned char* p = data_of(a, static_cast<size_t>(csize), stride, acc);
     std::vector<uint32_t> out(a.count, 0);
     if (p) {
       for (size_t i = 0; i < a.count; ++i) {
@@ -265,7 +266,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     if (img.bufferView < 0) continue;
     const tinygltf::BufferView& v = m.bufferViews.at(static_cast<size_t>(img.bufferView));
     const size_t held = m.buffers.at(static_cast<size_t>(v.buffer)).data.size();
-    if (v.byteOffset > held || v.byteLength > held - v.byteOffset || v.byteLength > static_cast<size_t>(std::numeric_limits<int>::max())) {
+    if (!view_holds(v, held, 0, v.byteLength, 1, 1) || v.byteLength > static_cast<size_t>(std::numeric_limits<int>::max())) {
       throw ParseError(file, 0, 0, "image " + std::to_string(i) + ": its bufferView " + std::to_string(img.bufferView) + " (bytes " +
                                        std::to_string(v.byteOffset) + " + " + std::to_string(v.byteLength) + ") runs past its buffer's " +
                                        std::to_string(held) + " bytes");
