@@ -293,39 +293,40 @@ TEST(Compositor, VirtualMirrorShowsTheRecordedWallThroughTheDepthMesh) {
 /// A diffuse box (shadows on the wall and among the virtual objects), a glass box and a mirror, in
 /// front of the wall with a noisy depth map (holes, so the hole filling and the colour-guided
 /// refinement run): every path of the compositor.
-void mixed_scene(SensorFrame& frame, core::TwoLevelScene& scene, MaterialLookup& material) {
-  frame = wall_frame();
-  for (int i = 0; i < kW * kH; i += 7) frame.depth.depth_m[i] = (i % 3) ? 2.0f + 0.003f * (i % 5) : 0.0f;
-  scene.set_static(box(kBoxLo, kBoxHi));
-  const auto glass_tris = box({-0.3f, -0.1f, 1.4f}, {-0.1f, 0.1f, 1.6f});
-  const core::MeshHandle glass = scene.add_rigid_mesh(glass_tris);
-  const VirtualMaterial glass_material{VirtualMaterial::kGlass, glm::vec3(0.9f), 1.5f};
-  scene.set_mesh_transmittance(glass, std::vector<float>(glass_tris.size(), shadow_transmittance(glass_material)));
-  scene.add_instance(glass, glm::mat4(1.0f));
-  const glm::vec3 a(0.3f, 0.05f, 1.2f), b(0.3f, 0.3f, 1.2f), c(0.5f, 0.3f, 1.6f), d(0.5f, 0.05f, 1.6f);
-  scene.add_instance(scene.add_rigid_mesh({{a, b, c}, {a, c, d}}), glm::mat4(1.0f));
-  scene.commit();
-  material = [glass_material](const core::Hit& h) {
-    if (h.inst == core::kStaticObject) return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f, 0.3f, 0.2f), 1.5f};
-    if (h.inst == 0) return glass_material;
-    return VirtualMaterial{VirtualMaterial::kMirror, glm::vec3(0.95f), 1.5f};
-  };
-}
+struct MixedScene {
+  SensorFrame frame = wall_frame();
+  core::TwoLevelScene scene{core::TwoLevelScene::Config::kKdTreeBvh};
+  MaterialLookup material;
+  MixedScene() {
+    for (int i = 0; i < kW * kH; i += 7) frame.depth.depth_m[i] = (i % 3) ? 2.0f + 0.003f * (i % 5) : 0.0f;
+    scene.set_static(box(kBoxLo, kBoxHi));
+    const auto glass_tris = box({-0.3f, -0.1f, 1.4f}, {-0.1f, 0.1f, 1.6f});
+    const core::MeshHandle glass = scene.add_rigid_mesh(glass_tris);
+    const VirtualMaterial glass_material{VirtualMaterial::kGlass, glm::vec3(0.9f), 1.5f};
+    scene.set_mesh_transmittance(glass, std::vector<float>(glass_tris.size(), shadow_transmittance(glass_material)));
+    scene.add_instance(glass, glm::mat4(1.0f));
+    const glm::vec3 a(0.3f, 0.05f, 1.2f), b(0.3f, 0.3f, 1.2f), c(0.5f, 0.3f, 1.6f), d(0.5f, 0.05f, 1.6f);
+    scene.add_instance(scene.add_rigid_mesh({{a, b, c}, {a, c, d}}), glm::mat4(1.0f));
+    scene.commit();
+    material = [glass_material](const core::Hit& h) {
+      if (h.inst == core::kStaticObject) return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f, 0.3f, 0.2f), 1.5f};
+      if (h.inst == 0) return glass_material;
+      return VirtualMaterial{VirtualMaterial::kMirror, glm::vec3(0.95f), 1.5f};
+    };
+  }
+};
 
 /// The same frame for any thread count, 1, 2, 3 and 4 threads: byte-identical.
 TEST(Compositor, SameImageForAnyThreadCount) {
-  SensorFrame frame;
-  core::TwoLevelScene scene(core::TwoLevelScene::Config::kKdTreeBvh);
-  MaterialLookup material;
-  mixed_scene(frame, scene, material);
+  const MixedScene m;
   CompositeOptions opt = shadow_options();
   opt.threads = 1;
   CompositeStats st;
-  const ColorImage one = composite(frame, scene, material, opt, &st);
+  const ColorImage one = composite(m.frame, m.scene, m.material, opt, &st);
   ASSERT_GT(st.shadowed_real_pixels, 100) << "the test needs shadows on the wall";
   for (const int threads : {2, 3, 4}) {
     opt.threads = threads;
-    const ColorImage many = composite(frame, scene, material, opt);
+    const ColorImage many = composite(m.frame, m.scene, m.material, opt);
     size_t differ = 0;
     for (size_t i = 0; i < one.rgb.size(); ++i) differ += one.rgb[i] != many.rgb[i];
     EXPECT_EQ(differ, 0u) << threads << " threads";
@@ -337,22 +338,19 @@ TEST(Compositor, SameImageForAnyThreadCount) {
 /// second, and so do the shadow rays at their hits). The sums run in another order, so a channel
 /// may differ by one step, and seldom.
 TEST(Compositor, PacketGenerationsGiveTheImageOfOneRayAtATime) {
-  SensorFrame frame;
-  core::TwoLevelScene scene(core::TwoLevelScene::Config::kKdTreeBvh);
-  MaterialLookup material;
-  mixed_scene(frame, scene, material);
+  const MixedScene m;
   CompositeOptions opt = shadow_options();
   opt.packet_generations = false;
-  const ColorImage reference = composite(frame, scene, material, opt);
+  const ColorImage reference = composite(m.frame, m.scene, m.material, opt);
   opt.packet_generations = true;
-  const ColorImage packets = composite(frame, scene, material, opt);
+  const ColorImage packets = composite(m.frame, m.scene, m.material, opt);
   size_t differ = 0, changed = 0;
   int worst = 0;
   for (size_t i = 0; i < reference.rgb.size(); ++i) {
     const int diff = std::abs(static_cast<int>(reference.rgb[i]) - static_cast<int>(packets.rgb[i]));
     worst = std::max(worst, diff);
     differ += diff != 0;
-    changed += reference.rgb[i] != frame.color.rgb[i];
+    changed += reference.rgb[i] != m.frame.color.rgb[i];
   }
   ASSERT_GT(changed, 3000u) << "the objects should cover part of the frame";
   EXPECT_LE(worst, 1);
