@@ -4,9 +4,7 @@
 // occlusion is where the models touch the surfaces they are anchored on.
 #include "ar_session.h"
 #include "commands.h"
-#include "plot.h"
-
-#include <unistd.h>
+#include "soak.h"
 
 #include <cstdio>
 #include <numeric>
@@ -22,16 +20,6 @@ struct Options {
   bool contact = false, no_occlusion = false, no_shadows = false;
 };
 
-/// Resident memory of this process in MB (/proc/self/statm).
-double resident_mb() {
-  long pages = 0, resident = 0;
-  if (FILE* f = std::fopen("/proc/self/statm", "r")) {
-    if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
-    std::fclose(f);
-  }
-  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / (1024.0 * 1024.0);
-}
-
 /// Pixels of the virtual objects within `band` metres of a support plane: where they touch it.
 std::vector<uint8_t> contact_pixels(const ar::SensorFrame& f, const std::vector<float>& zv, const std::vector<ar::Plane>& planes, double band) {
   std::vector<uint8_t> out(zv.size(), 0);
@@ -44,41 +32,6 @@ std::vector<uint8_t> contact_pixels(const ar::SensorFrame& f, const std::vector<
     for (const ar::Plane& pl : planes) out[i] = out[i] || std::fabs(pl.distance(p)) < band;
   }
   return out;
-}
-
-/// A long run's samples: CSV and two plots beside `opt.soak` (a path prefix), and the verdict:
-/// memory growth after the warm-up (the first tenth of the run) and the drift of the frame time
-/// (the median of the last quarter's samples against the first quarter's after the warm-up).
-nlohmann::json soak_report(const Options& opt, const std::vector<double>& frame, const std::vector<double>& rss,
-                           const std::vector<double>& ms) {
-  if (frame.size() < 8) throw std::invalid_argument("--soak: fewer than 8 samples; run more frames or lower --soak-every");
-  const std::filesystem::path prefix(opt.soak);
-  if (prefix.has_parent_path()) std::filesystem::create_directories(prefix.parent_path());
-  {
-    const std::filesystem::path csv = prefix.string() + ".csv", tmp = prefix.string() + ".csv.partial";
-    FILE* f = std::fopen(tmp.string().c_str(), "w");
-    if (!f) throw std::runtime_error(csv.string() + ": cannot write");
-    std::fprintf(f, "frame,resident_mb,frame_ms_median\n");
-    for (size_t i = 0; i < frame.size(); ++i) std::fprintf(f, "%.0f,%.2f,%.3f\n", frame[i], rss[i], ms[i]);
-    std::fclose(f);
-    std::filesystem::rename(tmp, csv);
-  }
-  const size_t warm = std::max<size_t>(1, frame.size() / 10);
-  const size_t n = frame.size() - warm, quarter = std::max<size_t>(1, n / 4);
-  const double rss_warm = rss[warm], rss_max = *std::max_element(rss.begin() + warm, rss.end()), rss_end = rss.back();
-  const double ms_first = median(std::vector<double>(ms.begin() + warm, ms.begin() + warm + quarter));
-  const double ms_last = median(std::vector<double>(ms.end() - quarter, ms.end()));
-  const double growth = rss_warm > 0 ? (rss_max - rss_warm) / rss_warm : 0.0, drift = ms_first > 0 ? (ms_last - ms_first) / ms_first : 0.0;
-  plot("resident memory (" + std::to_string(static_cast<long long>(frame.back())) + " frames)", {{"resident MB", rss}},
-       prefix.string() + "_memory.png", "MB", frame);
-  plot("frame time, median of every " + std::to_string(opt.soak_every) + " frames", {{"ms a frame", ms}}, prefix.string() + "_frame_time.png",
-       "ms", frame);
-  std::printf("  soak: resident %.1f MB after warm-up (frame %.0f), at most %.1f MB after it (%+.2f%%), %.1f MB at the end; "
-              "frame time %.2f ms in the first quarter after warm-up, %.2f ms in the last (%+.2f%%); %s.csv and the plots\n",
-              rss_warm, frame[warm], rss_max, 100.0 * growth, rss_end, ms_first, ms_last, 100.0 * drift, opt.soak.c_str());
-  return {{"samples", frame.size()}, {"every", opt.soak_every}, {"warmup_frames", frame[warm]}, {"resident_mb_after_warmup", rss_warm},
-          {"resident_mb_max_after_warmup", rss_max}, {"resident_mb_end", rss_end}, {"memory_growth", growth},
-          {"frame_ms_first_quarter", ms_first}, {"frame_ms_last_quarter", ms_last}, {"frame_time_drift", drift}};
 }
 
 void run(const Options& opt) {
@@ -101,7 +54,7 @@ void run(const Options& opt) {
   }
   std::vector<double> frame_ms, read_ms, update_ms, real_ms, trace_ms, shadow_ms, occlusion_ms, blend_ms;
   std::vector<double> flips;
-  std::vector<double> soak_frame, soak_rss, soak_ms;  // a sample every soak_every frames
+  SoakLog soak(opt.soak, opt.soak_every);
   std::vector<uint8_t> prev_vis, prev_contact;
   double contact_hidden = 0.0, contact_pixels_total = 0.0;
   FrameReader reader(source);
@@ -126,11 +79,7 @@ void run(const Options& opt) {
     shadow_ms.push_back(st.real_shadow_ms);
     occlusion_ms.push_back(st.occlusion_ms);
     blend_ms.push_back(st.composite_ms);
-    if (!opt.soak.empty() && (k + 1) % opt.soak_every == 0) {
-      soak_frame.push_back(static_cast<double>(k + 1));
-      soak_rss.push_back(resident_mb());
-      soak_ms.push_back(median(std::vector<double>(frame_ms.end() - opt.soak_every, frame_ms.end())));
-    }
+    soak.add(frame_ms.back());
     if (opt.contact && !st.visibility.empty()) {
       const std::vector<uint8_t> near = contact_pixels(f, st.virtual_depth, copt.support_planes, 0.02);
       std::vector<uint8_t> vis(st.visibility.size());
@@ -175,7 +124,7 @@ void run(const Options& opt) {
     out["contact"] = {{"flip_rate_median", median(flips)}, {"flip_rate_mean", flips.empty() ? 0.0 : std::accumulate(flips.begin(), flips.end(), 0.0) / flips.size()},
                       {"hidden_share", share_hidden}};
   }
-  if (!opt.soak.empty()) out["soak"] = soak_report(opt, soak_frame, soak_rss, soak_ms);
+  if (soak.on()) out["soak"] = soak.report();
   write_json(opt.json, out);
 }
 

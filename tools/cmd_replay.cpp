@@ -10,6 +10,7 @@
 #include "commands.h"
 #include "ar_session.h"
 #include "frame_views.h"
+#include "soak.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
@@ -63,7 +64,8 @@ bool display_available(std::string& why) {
 }
 
 struct Options {
-  std::string recording, screenshot, keys;
+  std::string recording, screenshot, keys, json, soak;
+  int soak_every = 200;
   ArArgs ar;
   int frames = 0;
   double speed = 1.0;
@@ -93,10 +95,16 @@ class Replay {
     auto anchor_wall = std::chrono::steady_clock::now();
     double anchor_t = frame_.color_time_s;
     bool dirty = true;
+    SoakLog soak(opt_.soak, opt_.soak_every, "views");
+    std::vector<double> view_ms;  // compositing, drawing and showing each view
+    const auto start = std::chrono::steady_clock::now();
     for (;;) {
       if (dirty) {
+        const auto t0 = std::chrono::steady_clock::now();
         render();
         cv::imshow(kWindow, view_);
+        view_ms.push_back(ms_since(t0));
+        soak.add(view_ms.back());
         ++shown;
       }
       dirty = true;
@@ -144,10 +152,15 @@ class Replay {
         anchor_t = frame_.color_time_s;
       }
     }
+    const double wall_s = ms_since(start) / 1000.0;
     if (!opt_.screenshot.empty()) save(opt_.screenshot);
     cv::destroyAllWindows();
-    std::printf("replay: %d views shown, stopped on frame %lld/%lld\n", shown, static_cast<long long>(index_ + 1),
-                static_cast<long long>(count_));
+    std::printf("replay: %d views shown, stopped on frame %lld/%lld; %.1f views/s, %.2f ms median a view (composited and shown)\n", shown,
+                static_cast<long long>(index_ + 1), static_cast<long long>(count_), shown / std::max(wall_s, 1e-9), median(view_ms));
+    nlohmann::json out{{"recording", opt_.recording}, {"scene", opt_.ar.scene}, {"views", shown},
+                       {"views_per_s", shown / std::max(wall_s, 1e-9)}, {"view_ms_median", median(view_ms)}};
+    if (soak.on()) out["soak"] = soak.report();
+    write_json(opt_.json, out);
     return 0;
   }
 
@@ -312,6 +325,9 @@ void add_replay_command(CLI::App& app) {
   cmd->add_flag("--loop", opt->loop, "start again at the end (otherwise it pauses on the last frame)");
   cmd->add_option("--frames", opt->frames, "quit after showing this many frames (0: run until q)")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--keys", opt->keys, "keys to press first, one per shown frame (e.g. \"o\" starts without occlusion)");
+  cmd->add_option("--json", opt->json, "write views, views_per_s and view_ms_median (and the soak's figures) as JSON");
+  cmd->add_option("--soak", opt->soak, "a long run: sample resident memory and the time of each view into PREFIX.csv, PREFIX_memory.png and PREFIX_frame_time.png");
+  cmd->add_option("--soak-every", opt->soak_every, "views between --soak samples")->capture_default_str()->check(CLI::Range(1, 1000000));
   cmd->add_option("--screenshot", opt->screenshot, "on quitting, save the last view (with its head-up display) as PNG");
   cmd->callback([opt] {
     std::string why;

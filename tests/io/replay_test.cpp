@@ -5,6 +5,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -128,6 +131,56 @@ TEST_F(Replay, KeysPauseStepSeekAndSwitchViews) {
   const cv::Vec3b left = side.at<cv::Vec3b>(135, 126), middle = side.at<cv::Vec3b>(135, 126 + 320);
   EXPECT_GT(left[1], 150);
   EXPECT_FALSE(middle[1] > 150 && middle[0] < 80 && middle[2] < 80) << "the original has no box";
+}
+
+/// The soak as scripts/soak.sh runs it, made short: the recording looped at full speed, a sample
+/// every 8 views. The CSV holds one row a sample, and the verdict in the JSON is worked out again
+/// here from the CSV: growth = (largest resident memory after the warm-up - the warm-up's) / the
+/// warm-up's, drift = the last quarter's median time against the first quarter's after the warm-up.
+TEST_F(Replay, SoakSamplesMemoryAndTimeAndJudgesThem) {
+  if (!have_xvfb()) GTEST_SKIP() << "Xvfb not installed (scripts/install-deps.sh installs it)";
+  start_xvfb();
+  const auto prefix = dir_ / "soak", json_path = dir_ / "replay.json";
+  const auto [status, out] = run_capture("DISPLAY=" + display_ + " " + std::string(ARTRACE_BINARY) + " replay " +
+                                             (kRoot / "data/recordings/room").string() + " --scene " + scene_.string() +
+                                             " --threads 2 --loop --speed 100 --frames 80 --soak " + prefix.string() +
+                                             " --soak-every 8 --json " + json_path.string(),
+                                         dir_ / "log.txt");
+  ASSERT_EQ(status, 0) << out;
+  // 80 views of a 30-frame recording looped: the third pass stops on its 20th frame
+  EXPECT_NE(out.find("80 views shown, stopped on frame 20/30"), std::string::npos) << out;
+  std::ifstream csv(prefix.string() + ".csv");
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line, "view,resident_mb,view_ms_median");
+  std::vector<double> views, rss, ms;
+  while (std::getline(csv, line)) {
+    double v = 0, r = 0, m = 0;
+    ASSERT_EQ(std::sscanf(line.c_str(), "%lf,%lf,%lf", &v, &r, &m), 3) << line;
+    views.push_back(v);
+    rss.push_back(r);
+    ms.push_back(m);
+  }
+  ASSERT_EQ(views.size(), 10u);
+  for (size_t i = 0; i < views.size(); ++i) {
+    EXPECT_EQ(views[i], 8.0 * (i + 1));
+    EXPECT_GT(rss[i], 10.0) << "resident MB";
+    EXPECT_GT(ms[i], 0.0);
+  }
+  const nlohmann::json j = nlohmann::json::parse(std::ifstream(json_path));
+  EXPECT_EQ(j["views"], 80);
+  const nlohmann::json& soak = j["soak"];
+  // 10 samples: the first (a tenth) is the warm-up; 9 after it, quarters of 2
+  const double warm = rss[1], largest = *std::max_element(rss.begin() + 1, rss.end());
+  EXPECT_NEAR(soak["memory_growth"].get<double>(), (largest - warm) / warm, 1e-3);
+  const double first = 0.5 * (ms[1] + ms[2]), last = 0.5 * (ms[8] + ms[9]);
+  EXPECT_NEAR(soak["frame_ms_first_quarter"].get<double>(), first, 2e-3);
+  EXPECT_NEAR(soak["frame_ms_last_quarter"].get<double>(), last, 2e-3);
+  EXPECT_NEAR(soak["frame_time_drift"].get<double>(), (last - first) / first, 1e-3);
+  for (const char* png : {"_memory.png", "_frame_time.png"}) {
+    const cv::Mat plot = cv::imread(prefix.string() + png);
+    EXPECT_FALSE(plot.empty()) << png;
+  }
 }
 
 }  // namespace
