@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <set>
@@ -241,6 +242,48 @@ Vec to_floats(const std::vector<double>& values, const std::string& file, const 
   return out;
 }
 
+// tinygltf's file access for external images and buffers (uris naming files), narrowed to what a
+// model can mean. Its own looks for a uri beside the model and then in the current folder, so a
+// model missing a texture silently took a file of that name from wherever it was run; and it reads
+// a folder as a file whose size, found by seeking to its end, is 2^63 - 1 bytes, which it then
+// allocates (fuzz_gltf: a uri "data" run from the project's folder). Here only regular files
+// beside the model (or under the folder the uri leads to from there) exist.
+
+/// The folder tinygltf joins a model's uris to: the model's path up to its last separator.
+std::string base_folder(const std::string& model) {
+  const size_t at = model.find_last_of("/\\");
+  return at == std::string::npos ? std::string() : model.substr(0, at);
+}
+
+/// `user` is the model's base_folder; tinygltf asks for the uri joined to it, then to ".".
+bool file_exists(const std::string& path, void* user) {
+  const std::string& base = *static_cast<const std::string*>(user);
+  if (!base.empty() && path.compare(0, base.size() + 1, base + "/") != 0) return false;  // not from the model's folder
+  std::error_code ec;
+  return std::filesystem::is_regular_file(path, ec);
+}
+
+bool read_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+  std::error_code ec;
+  const bool regular = std::filesystem::is_regular_file(path, ec);
+  const uintmax_t size = regular ? std::filesystem::file_size(path, ec) : 0;
+  std::ifstream f(path, std::ios::binary);
+  if (!regular || ec || !f) {
+    if (err) *err += path + ": cannot read it as a file\n";
+    return false;
+  }
+  if (size == 0) {  // tinygltf's own reader refuses it too; its parsers do not expect no bytes
+    if (err) *err += path + ": the file is empty\n";
+    return false;
+  }
+  out->resize(static_cast<size_t>(size));
+  if (!f.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(size))) {
+    if (err) *err += path + ": cannot read its " + std::to_string(size) + " bytes\n";
+    return false;
+  }
+  return true;
+}
+
 ar::Wrap wrap_of(int w) {
   return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? ar::Wrap::kClampToEdge
          : w == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT ? ar::Wrap::kMirroredRepeat
@@ -256,6 +299,8 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   tinygltf::Model m;
   std::string err, warn;
   const std::string file = path.string();
+  std::string base = base_folder(file);
+  loader.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_file, &tinygltf::WriteWholeFile, &base});
   if (!std::filesystem::exists(path)) throw ParseError(file, 0, 0, "no such file");
   const bool ok = path.extension() == ".glb" ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
                                              : loader.LoadASCIIFromFile(&m, &err, &warn, file);

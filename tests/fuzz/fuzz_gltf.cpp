@@ -1,5 +1,5 @@
 // glTF models: JSON (.gltf) or binary (.glb, by its magic), with an image file beside them that
-// they may refer to ("texture.png"), then the node transforms and morph weights of its clips.
+// they may refer to ("texture.png") and a folder ("data"), then the node transforms and morph weights of its clips.
 #include "fuzz_util.h"
 
 #include "artrace/io/gltf_model.h"
@@ -8,6 +8,9 @@
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
   artrace::fuzz::provide("tests/data/fuzz/texture.png", "texture.png");
+  // a folder beside the model, for uris that name one ("data" once took tinygltf's reader to a
+  // folder, whose size it read as 2^63 - 1 bytes and allocated)
+  std::filesystem::create_directories(artrace::fuzz::scratch() / "data");
   return 0;
 }
 

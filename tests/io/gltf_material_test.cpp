@@ -501,6 +501,46 @@ TEST(GltfImages, ImageBufferViewPastItsBufferIsRefused) {
   }
 }
 
+/// An image uri is looked up beside the model, as a regular file. A uri naming a folder is a missing
+/// image (tinygltf's own reader took a folder's size as 2^63 - 1 bytes and allocated it: a campaign
+/// finding, whose input is in the corpus), and so is a file that exists only in the current folder
+/// (tinygltf's own lookup fell back to it, a silently wrong texture). The same file beside the model
+/// loads.
+TEST(GltfImages, ImageUriIsARegularFileBesideTheModel) {
+  const auto dir = test_dir("artrace_gltf_uri"), elsewhere = test_dir("artrace_gltf_uri_cwd");
+  std::filesystem::create_directories(dir / "folder");
+  std::vector<uint8_t> png;
+  cv::imencode(".png", cv::Mat(2, 2, CV_8UC3, cv::Scalar(0, 0, 255)), png);
+  std::ofstream(elsewhere / "red.png", std::ios::binary).write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+  QuadGltf q = QuadGltf::at(-1, 1, -1, 1, 2);
+  q.textures = {{{"source", 0}}};
+  q.material = {{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}};
+  q.images = {{{"uri", "folder"}}};
+  q.write(dir / "folder_image.gltf");
+  q.images = {{{"uri", "red.png"}}};
+  q.write(dir / "red_image.gltf");
+  const auto cwd = std::filesystem::current_path();
+  std::filesystem::current_path(elsewhere);  // red.png is in the current folder, not beside the model
+  for (const auto& [name, uri] : {std::pair{"folder_image.gltf", "folder"}, std::pair{"red_image.gltf", "red.png"}}) {
+    try {
+      load_gltf(dir / name);
+      ADD_FAILURE() << name << " accepted";
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / name).string()), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(std::string("'") + uri + "') is missing"), std::string::npos) << e.what();
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << name << ": " << e.what();
+    }
+  }
+  std::filesystem::current_path(cwd);
+  std::filesystem::copy_file(elsewhere / "red.png", dir / "red.png");
+  const GltfModel m = load_gltf(dir / "red_image.gltf");
+  ASSERT_EQ(m.images.size(), 1u);
+  ASSERT_EQ(m.images[0].width, 2);
+  EXPECT_EQ(m.images[0].rgba[0], 255) << "red";
+  EXPECT_EQ(m.images[0].rgba[1], 0);
+}
+
 /// Every model of the shared data loads; the textured ones, rendered head-on over a grey wall,
 /// show their texture's colours: each covered pixel is within a few levels of a colour of the
 /// texture (as shaded: ambient 1, Lambert), and the rendered colours span the texture's.
