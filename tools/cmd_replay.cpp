@@ -95,7 +95,7 @@ class Replay {
     auto anchor_wall = std::chrono::steady_clock::now();
     double anchor_t = frame_.color_time_s;
     bool dirty = true;
-    SoakLog soak(opt_.soak, opt_.soak_every, "views");
+    SoakLog soak(opt_.soak, opt_.soak_every, "view");
     std::vector<double> view_ms;  // compositing, drawing and showing each view
     const auto start = std::chrono::steady_clock::now();
     for (;;) {
@@ -152,13 +152,13 @@ class Replay {
         anchor_t = frame_.color_time_s;
       }
     }
-    const double wall_s = ms_since(start) / 1000.0;
+    const double views_per_s = shown / std::max(ms_since(start) / 1000.0, 1e-9);
     if (!opt_.screenshot.empty()) save(opt_.screenshot);
     cv::destroyAllWindows();
     std::printf("replay: %d views shown, stopped on frame %lld/%lld; %.1f views/s, %.2f ms median a view (composited and shown)\n", shown,
-                static_cast<long long>(index_ + 1), static_cast<long long>(count_), shown / std::max(wall_s, 1e-9), median(view_ms));
+                static_cast<long long>(index_ + 1), static_cast<long long>(count_), views_per_s, median(view_ms));
     nlohmann::json out{{"recording", opt_.recording}, {"scene", opt_.ar.scene}, {"views", shown},
-                       {"views_per_s", shown / std::max(wall_s, 1e-9)}, {"view_ms_median", median(view_ms)}};
+                       {"views_per_s", views_per_s}, {"view_ms_median", median(view_ms)}};
     if (soak.on()) out["soak"] = soak.report();
     write_json(opt_.json, out);
     return 0;

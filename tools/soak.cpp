@@ -33,14 +33,14 @@ void SoakLog::add(double frame_ms) {
 }
 
 nlohmann::json SoakLog::report() const {
-  if (frame_.size() < 8) throw std::invalid_argument("--soak: fewer than 8 samples; run more " + what_ + " or lower --soak-every");
+  if (frame_.size() < 8) throw std::invalid_argument("--soak: fewer than 8 samples; run more " + unit_ + "s or lower --soak-every");
   const std::filesystem::path prefix(prefix_);
   if (prefix.has_parent_path()) std::filesystem::create_directories(prefix.parent_path());
   {
     const std::filesystem::path csv = prefix_ + ".csv", tmp = prefix_ + ".csv.partial";
     FILE* f = std::fopen(tmp.string().c_str(), "w");
     if (!f) throw std::runtime_error(csv.string() + ": cannot write");
-    std::fprintf(f, "%s,resident_mb,%s_ms_median\n", what_ == "frames" ? "frame" : "view", what_ == "frames" ? "frame" : "view");
+    std::fprintf(f, "%s,resident_mb,%s_ms_median\n", unit_.c_str(), unit_.c_str());
     for (size_t i = 0; i < frame_.size(); ++i) std::fprintf(f, "%.0f,%.2f,%.3f\n", frame_[i], rss_[i], ms_[i]);
     std::fclose(f);
     std::filesystem::rename(tmp, csv);
@@ -51,13 +51,12 @@ nlohmann::json SoakLog::report() const {
   const double ms_first = median(std::vector<double>(ms_.begin() + warm, ms_.begin() + warm + quarter));
   const double ms_last = median(std::vector<double>(ms_.end() - quarter, ms_.end()));
   const double growth = rss_warm > 0 ? (rss_max - rss_warm) / rss_warm : 0.0, drift = ms_first > 0 ? (ms_last - ms_first) / ms_first : 0.0;
-  plot("resident memory (" + std::to_string(static_cast<long long>(frame_.back())) + " " + what_ + ")", {{"resident MB", rss_}},
+  plot("resident memory (" + std::to_string(static_cast<long long>(frame_.back())) + " " + unit_ + "s)", {{"resident MB", rss_}},
        prefix_ + "_memory.png", "MB", frame_);
-  plot("time a " + std::string(what_ == "frames" ? "frame" : "view") + ", median of every " + std::to_string(every_) + " " + what_,
-       {{what_ == "frames" ? "ms a frame" : "ms a view", ms_}}, prefix_ + "_frame_time.png", "ms", frame_);
+  plot("time a " + unit_ + ", median of every " + std::to_string(every_) + " " + unit_ + "s", {{"ms a " + unit_, ms_}}, prefix_ + "_frame_time.png", "ms", frame_);
   std::printf("  soak: resident %.1f MB after warm-up (%s %.0f), at most %.1f MB after it (%+.2f%%), %.1f MB at the end; "
               "time %.2f ms in the first quarter after warm-up, %.2f ms in the last (%+.2f%%); %s.csv and the plots\n",
-              rss_warm, what_ == "frames" ? "frame" : "view", frame_[warm], rss_max, 100.0 * growth, rss_end, ms_first, ms_last,
+              rss_warm, unit_.c_str(), frame_[warm], rss_max, 100.0 * growth, rss_end, ms_first, ms_last,
               100.0 * drift, prefix_.c_str());
   return {{"samples", frame_.size()}, {"every", every_}, {"warmup_frames", frame_[warm]}, {"resident_mb_after_warmup", rss_warm},
           {"resident_mb_max_after_warmup", rss_max}, {"resident_mb_end", rss_end}, {"memory_growth", growth},

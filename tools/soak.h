@@ -15,9 +15,9 @@ double resident_mb();
 
 class SoakLog {
  public:
-  /// Samples are written to PREFIX.csv, PREFIX_memory.png and PREFIX_frame_time.png; `what` names
-  /// the unit counted ("frames", "views").
-  SoakLog(std::string prefix, int every, std::string what = "frames") : prefix_(std::move(prefix)), every_(every), what_(std::move(what)) {}
+  /// Samples are written to PREFIX.csv, PREFIX_memory.png and PREFIX_frame_time.png; `unit` names
+  /// what is counted ("frame", "view").
+  SoakLog(std::string prefix, int every, std::string unit = "frame") : prefix_(std::move(prefix)), every_(every), unit_(std::move(unit)) {}
 
   bool on() const { return !prefix_.empty(); }
   /// Records the time of one more frame; every `every` frames, a sample: the frame count, resident
@@ -32,7 +32,7 @@ class SoakLog {
  private:
   std::string prefix_;
   int every_;
-  std::string what_;
+  std::string unit_;
   std::vector<double> recent_;
   double count_ = 0;
   std::vector<double> frame_, rss_, ms_;
