@@ -116,7 +116,17 @@ class Parser {
   }
 
   void parse_file(const std::filesystem::path& path, int depth, const Lexer* from, const Token* at) {
-    if (depth > kMaxIncludeDepth) fail(*from, *at, "includes nested deeper than 32 (a cycle?)");
+    // a file that is still being read, included again, would be followed forever: name the cycle
+    std::error_code ec;
+    std::filesystem::path key = std::filesystem::weakly_canonical(path, ec);
+    if (ec) key = path.lexically_normal();
+    for (std::size_t i = 0; i < reading_.size(); ++i) {
+      if (reading_[i] != key) continue;
+      std::string chain;
+      for (std::size_t j = i; j < reading_.size(); ++j) chain += reading_[j].filename().string() + " -> ";
+      fail(*from, *at, "include cycle: " + chain + key.filename().string());
+    }
+    if (depth > kMaxIncludeDepth) fail(*from, *at, "includes nested deeper than 32");
     std::ifstream in(path, std::ios::binary);
     if (!in) {
       if (from) fail(*from, *at, "cannot open included file '" + path.string() + "'");
@@ -127,7 +137,9 @@ class Parser {
     Lexer lex(path.string(), buf.str());
     const std::filesystem::path dir = path.parent_path();
     Token tok;
+    reading_.push_back(key);
     while (lex.next(tok)) record(lex, tok, dir, depth);
+    reading_.pop_back();
   }
 
   void finish() {
@@ -556,6 +568,7 @@ class Parser {
 
   AffScene& scene_;
   std::vector<Scope> scopes_;
+  std::vector<std::filesystem::path> reading_;  ///< the files being read, outermost first
   uint32_t material_ = 0;
   std::map<std::string, int> texture_ids_;
   std::map<std::string, std::string> animation_origin_;

@@ -223,8 +223,26 @@ TEST_F(AffFiles, MalformedInputNamesFileLineAndProblem) {
   write("inner.aff", "p 3\n0 0 0\n1 x 0\n");
   const std::string msg = error_of(write("outer.aff", "i 0 inner.aff\n"));
   EXPECT_NE(msg.find("inner.aff:3:"), std::string::npos) << msg;
-  // an include cycle is reported, not followed forever
-  EXPECT_NE(error_of(write("cycle.aff", "i 0 cycle.aff\n")).find("nested deeper"), std::string::npos);
+  // an include cycle is reported at the include that closes it, naming the chain
+  const auto self = write("cycle.aff", "i 0 cycle.aff\n");
+  const std::string self_msg = error_of(self);
+  EXPECT_NE(self_msg.find(self.string() + ":1:"), std::string::npos) << self_msg;
+  EXPECT_NE(self_msg.find("include cycle: cycle.aff -> cycle.aff"), std::string::npos) << self_msg;
+  write("ping.aff", "i 0 sub/../pong.aff\n");
+  std::filesystem::create_directories(dir_ / "aff" / "sub");
+  const auto pong = write("pong.aff", "\ni 0 ping.aff\n");
+  const std::string pair_msg = error_of(pong);
+  EXPECT_NE(pair_msg.find("ping.aff:1:"), std::string::npos) << pair_msg;
+  EXPECT_NE(pair_msg.find("include cycle: pong.aff -> ping.aff -> pong.aff"), std::string::npos) << pair_msg;
+  // a chain of distinct files deeper than 32 is refused by depth (no cycle)
+  for (int i = 0; i < 40; ++i) write("deep" + std::to_string(i) + ".aff", "i 0 deep" + std::to_string(i + 1) + ".aff\n");
+  write("deep40.aff", "");
+  const std::string deep_msg = error_of(dir_ / "aff" / "deep0.aff");
+  EXPECT_NE(deep_msg.find("nested deeper than 32"), std::string::npos) << deep_msg;
+  EXPECT_EQ(deep_msg.find("cycle"), std::string::npos) << deep_msg;
+  // the same file included twice side by side is no cycle
+  write("leaf.aff", "p 3\n0 0 0\n1 0 0\n0 1 0\n");
+  EXPECT_EQ(load_aff(write("twice.aff", "i 0 leaf.aff\ni 0 leaf.aff\n")).triangle_count(), 2u);
 }
 
 TEST(BartScenes, KitchenHasThePublishedTriangleCounts) {
