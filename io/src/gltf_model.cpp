@@ -350,6 +350,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     }
     out.images.push_back(std::move(g));
   }
+  std::vector<uint8_t> used_images(out.images.size(), 0);
   auto texture_ref = [&](int texture, int tex_coord, const tinygltf::ExtensionMap& ext, const std::string& what) {
     GltfTextureRef t;
     if (texture < 0) return t;
@@ -359,6 +360,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
       r.fail(what + ": texture " + std::to_string(texture) + " has no image this reader can use (its source is " + std::to_string(tex.source) + ")");
     }
     const GltfImage& img = out.images[static_cast<size_t>(tex.source)];
+    used_images[static_cast<size_t>(tex.source)] = 1;
     if (img.rgba.empty()) r.fail(what + ": image " + std::to_string(tex.source) + " ('" + img.name + "') is missing or cannot be decoded");
     t.image = tex.source;
     t.tex_coord = tex_coord;
@@ -440,6 +442,12 @@ GltfModel load_gltf(const std::filesystem::path& path) {
       g.emissive *= to_float(es->second.Get("emissiveStrength").GetNumberAsDouble(), file, at + " emissiveStrength");
     }
     out.materials.push_back(g);
+  }
+  for (size_t i = 0; i < out.images.size(); ++i) {
+    if (out.images[i].rgba.empty() && !used_images[i]) {
+      out.warnings.push_back(file + ": image " + std::to_string(i) + " ('" + out.images[i].name +
+                             "') is missing or cannot be decoded; no material uses it");
+    }
   }
 
   for (size_t mi = 0; mi < m.meshes.size(); ++mi) {

@@ -541,6 +541,25 @@ TEST(GltfImages, ImageUriIsARegularFileBesideTheModel) {
   EXPECT_EQ(m.images[0].rgba[1], 0);
 }
 
+/// An image no material uses loads nothing when it is missing, but says so: a warning names the
+/// model and the image, and the model loads. An image that does load gives no warning.
+TEST(GltfImages, AnUnusedImageThatCannotLoadIsAWarning) {
+  const auto dir = test_dir("artrace_gltf_unused_image");
+  std::vector<uint8_t> png;
+  cv::imencode(".png", cv::Mat(2, 2, CV_8UC3, cv::Scalar(0, 0, 255)), png);
+  std::ofstream(dir / "red.png", std::ios::binary).write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+  QuadGltf q = QuadGltf::at(-1, 1, -1, 1, 2);
+  q.images = {{{"uri", "red.png"}}, {{"uri", "absent.png"}}};
+  q.write(dir / "unused.gltf");
+  const GltfModel m = load_gltf(dir / "unused.gltf");
+  ASSERT_EQ(m.images.size(), 2u);
+  EXPECT_EQ(m.images[0].width, 2);
+  EXPECT_TRUE(m.images[1].rgba.empty());
+  ASSERT_EQ(m.warnings.size(), 1u);
+  EXPECT_NE(m.warnings[0].find((dir / "unused.gltf").string() + ": image 1 ('absent.png') is missing or cannot be decoded"), std::string::npos)
+      << m.warnings[0];
+}
+
 /// Every model of the shared data loads; the textured ones, rendered head-on over a grey wall,
 /// show their texture's colours: each covered pixel is within a few levels of a colour of the
 /// texture (as shaded: ambient 1, Lambert), and the rendered colours span the texture's.
