@@ -17,6 +17,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr int kMaxIncludeDepth = 32;
 constexpr long kMaxCount = 50'000'000;  // larger counts are corrupt files, not scenes
+constexpr long kCheckedCount = 65'536;   // larger counts are checked against the file's length first
 
 struct Token {
   std::string_view text;
@@ -47,6 +48,8 @@ class Lexer {
     tok = peeked_;
     return true;
   }
+  /// Bytes of the file not read yet (a peeked token counts as unread).
+  size_t remaining() const { return src_.size() - pos_ + (has_peek_ ? peeked_.text.size() : 0); }
   /// Where the file ended, for "unexpected end of file" errors.
   Token end_token() const { return Token{{}, line_, col()}; }
 
@@ -187,8 +190,25 @@ class Parser {
     return v;
   }
 
-  long integer(Lexer& lex, const char* what, long lo, long hi) {
+  /// A count of items of `numbers_each` numbers that follow it. A large one (what it allocates
+  /// matters) is refused when the rest of the file is too short to hold its items (a number takes
+  /// at least two bytes with its separator), before anything is allocated: a corrupt count in a
+  /// short file would otherwise ask for gigabytes. A small one is left to the reading of its
+  /// items, whose errors say where the file ends or which token is wrong.
+  long count(Lexer& lex, const char* what, long lo, long numbers_each) {
+    Token at;
+    const long n = integer(lex, what, lo, kMaxCount, &at);
+    const long need = n * numbers_each * 2 - 1;
+    if (n > kCheckedCount && need > static_cast<long>(lex.remaining())) {
+      fail(lex, at, std::string(what) + " " + std::to_string(n) + " needs at least " + std::to_string(need) + " more bytes (" +
+                        std::to_string(numbers_each) + " numbers each), but the file has " + std::to_string(lex.remaining()) + " left");
+    }
+    return n;
+  }
+
+  long integer(Lexer& lex, const char* what, long lo, long hi, Token* at = nullptr) {
     const Token t = expect_token(lex, what);
+    if (at) *at = t;
     long v = 0;
     const auto [end, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), v);
     if (ec != std::errc() || end != t.text.data() + t.text.size()) {
@@ -373,7 +393,7 @@ class Parser {
   }
 
   void polygon(Lexer& lex, bool with_normals) {
-    const long n = integer(lex, "the vertex count", 3, kMaxCount);
+    const long n = count(lex, "the vertex count", 3, with_normals ? 6 : 3);
     std::vector<glm::dvec3> p(n), nrm(with_normals ? n : 0);
     for (long i = 0; i < n; ++i) {
       p[i] = vec3(lex, "a vertex coordinate");
@@ -439,7 +459,7 @@ class Parser {
 
   void mesh(Lexer& lex, const std::filesystem::path& dir) {
     expect_word(lex, "vertices");
-    const long nv = integer(lex, "the vertex count", 0, kMaxCount);
+    const long nv = count(lex, "the vertex count", 0, 3);
     std::vector<glm::dvec3> pos(nv);
     for (auto& p : pos) p = vec3(lex, "a vertex coordinate");
     std::vector<glm::dvec3> nrm;
@@ -447,12 +467,12 @@ class Parser {
     int tex = -1;
     Token t = expect_token(lex, "'normals', 'texturecoords' or 'triangles'");
     if (t.text == "normals") {
-      nrm.resize(integer(lex, "the normal count", 0, kMaxCount));
+      nrm.resize(count(lex, "the normal count", 0, 3));
       for (auto& n : nrm) n = vec3(lex, "a normal component");
       t = expect_token(lex, "'texturecoords' or 'triangles'");
     }
     if (t.text == "texturecoords") {
-      uvs.resize(integer(lex, "the texture coordinate count", 0, kMaxCount));
+      uvs.resize(count(lex, "the texture coordinate count", 0, 2));
       tex = texture_index(word(lex, "a texture file name"), dir);
       for (auto& uv : uvs) {
         const double u = number(lex, "a texture coordinate");
@@ -461,7 +481,7 @@ class Parser {
       t = expect_token(lex, "'triangles'");
     }
     if (t.text != "triangles") fail(lex, t, "expected 'triangles' in mesh, got " + quote_token(t.text));
-    const long nt = integer(lex, "the triangle count", 0, kMaxCount);
+    const long nt = count(lex, "the triangle count", 0, 3);
     for (long i = 0; i < nt; ++i) {
       glm::dvec3 p[3], n[3];
       glm::dvec2 uv[3];
@@ -477,7 +497,7 @@ class Parser {
   }
 
   void animated_triangle(Lexer& lex) {
-    const long n = integer(lex, "the key count", 1, kMaxCount);
+    const long n = count(lex, "the key count", 1, 19);
     AffAnimatedTriangle a;
     a.node = scopes_.back().node;
     a.material = material_;
@@ -527,7 +547,7 @@ class Parser {
   }
 
   std::vector<TcbKey> track(Lexer& lex, bool rotation) {
-    const long n = integer(lex, "the key count", 1, kMaxCount);
+    const long n = count(lex, "the key count", 1, 7);
     std::vector<TcbKey> keys(n);
     for (auto& k : keys) {
       k.time = number(lex, "a key time");

@@ -210,6 +210,15 @@ TEST_F(AffFiles, MalformedInputNamesFileLineAndProblem) {
       {"track_keyword", "k a\n{\nspin 1\n}\n", 3, "expected 'transl', 'rot', 'scale' or '}'"},
       // a corrupt file's token: binary bytes escaped, and no more than 40 characters of it quoted
       {"binary_token", "l 1 t\x01\xd6 3\n", 1, "got \"t\\x01\\xd6\""},
+      // a count the rest of the file cannot hold is refused before anything is allocated for it
+      // (before, 24 bytes made the reader zero 2.4 GB of vertices and normals, then fail)
+      {"polygon_count", "pp 50000000\n0 0 0 0 0 1\n", 1,
+       "the vertex count 50000000 needs at least 599999999 more bytes (6 numbers each), but the file has 13 left"},
+      {"normal_count", "m\nvertices 1\n0 0 0\nnormals 9999999\n0 0 1\n", 4,
+       "the normal count 9999999 needs at least 59999993 more bytes (3 numbers each), but the file has 7 left"},
+      {"key_count", "k a\n{\ntransl 100000\n0 0 0 0 0 0 0\n}\n", 3, "the key count 100000 needs at least 1399999 more bytes (7 numbers each)"},
+      // a small count is read item by item: the error is where the file really went wrong
+      {"small_count", "p 3\n0 0 0\n1 y 0\n", 3, "expected a vertex coordinate, got \"y\""},
       {"long_token", "l 1 yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy 3\n", 1, "got \"yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy\"..."},
   };
   for (const BadCase& c : cases) {
