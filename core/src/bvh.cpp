@@ -19,9 +19,9 @@ constexpr uint16_t kMaxDepth = 60;  // below the traversal stack of 64
 constexpr float kTraversalCost = 1.0f;
 constexpr uint32_t kParallelThreshold = 4096;
 
-Aabb bounds_of(const std::vector<Triangle>& tris, const uint32_t* refs, uint32_t b, uint32_t e) {
+Aabb bounds_of(const std::vector<Aabb>& boxes, const uint32_t* refs, uint32_t b, uint32_t e) {
   Aabb box;
-  for (uint32_t i = b; i < e; ++i) box.extend(Aabb::of(tris[refs[i]]));
+  for (uint32_t i = b; i < e; ++i) box.extend(boxes[refs[i]]);
   return box;
 }
 
@@ -40,7 +40,8 @@ void Bvh::rebuild(std::vector<Triangle> tris) {
   tris_ = std::move(tris);
   const uint32_t n = static_cast<uint32_t>(tris_.size());
   centroids_.resize(n);
-  for (uint32_t i = 0; i < n; ++i) centroids_[i] = (tris_[i].v0 + tris_[i].v1 + tris_[i].v2) * (1.0f / 3.0f);
+  boxes_.resize(n);
+  set_boxes_and_centroids();
   prim_refs_.resize(n);
   for (uint32_t i = 0; i < n; ++i) prim_refs_[i] = i;
   const size_t slots = std::max<size_t>(2, 2 * static_cast<size_t>(n));
@@ -51,12 +52,20 @@ void Bvh::rebuild(std::vector<Triangle> tris) {
   reset_root();
 }
 
+void Bvh::set_boxes_and_centroids() {
+  // the splits bin every triangle of a node by its box again at each level: boxes worked out once
+  for (size_t i = 0; i < tris_.size(); ++i) {
+    centroids_[i] = (tris_[i].v0 + tris_[i].v1 + tris_[i].v2) * (1.0f / 3.0f);
+    boxes_[i] = Aabb::of(tris_[i]);
+  }
+}
+
 void Bvh::reset_root() {
   BvhNode& root = nodes_[0];
   root = BvhNode{};
   root.begin = 0;
   root.end = static_cast<uint32_t>(tris_.size());
-  root.bounds = bounds_of(tris_, prim_refs_.data(), root.begin, root.end);
+  root.bounds = bounds_of(boxes_, prim_refs_.data(), root.begin, root.end);
   state_[0].store(kUnbuilt, std::memory_order_release);
 }
 
@@ -101,7 +110,7 @@ void Bvh::split_node(uint32_t index) const {
     for (uint32_t i = b; i < e; ++i) {
       const int k = bin_of(refs[i]);
       ++bin_count[k];
-      bin_box[k].extend(Aabb::of(tris_[refs[i]]));
+      bin_box[k].extend(boxes_[refs[i]]);
     }
     float right_area[kBins];
     Aabb acc;
@@ -148,7 +157,7 @@ void Bvh::split_node(uint32_t index) const {
     child.begin = side == 0 ? b : m;
     child.end = side == 0 ? m : e;
     child.depth = static_cast<uint16_t>(node.depth + 1);
-    child.bounds = bounds_of(tris_, refs, child.begin, child.end);
+    child.bounds = bounds_of(boxes_, refs, child.begin, child.end);
     state_[slot].store(kUnbuilt, std::memory_order_relaxed);
   }
   build_area_[index] = node.bounds.surface_area();
@@ -186,7 +195,7 @@ Aabb Bvh::refit_node(uint32_t index) {
     box.extend(refit_node(2 * n.split + 1));
     n.bounds = box;
   } else {
-    n.bounds = bounds_of(tris_, prim_refs_.data(), n.begin, n.end);
+    n.bounds = bounds_of(boxes_, prim_refs_.data(), n.begin, n.end);
   }
   return n.bounds;
 }
@@ -197,7 +206,7 @@ void Bvh::refit(const std::vector<Triangle>& tris) {
                                 std::to_string(tris_.size()) + " (adding or removing triangles needs rebuild)");
   }
   tris_ = tris;
-  for (size_t i = 0; i < tris_.size(); ++i) centroids_[i] = (tris_[i].v0 + tris_[i].v1 + tris_[i].v2) * (1.0f / 3.0f);
+  set_boxes_and_centroids();
   if (!tris_.empty()) refit_node(0);
 }
 

@@ -99,6 +99,7 @@ class Bvh {
 
  private:
   void reset_root();
+  void set_boxes_and_centroids();
   void split_node(uint32_t node) const;
   void build_subtree(uint32_t node) const;
   Aabb refit_node(uint32_t node);
@@ -106,6 +107,7 @@ class Bvh {
 
   std::vector<Triangle> tris_;
   std::vector<glm::vec3> centroids_;
+  std::vector<Aabb> boxes_;  ///< each triangle's box
   mutable std::vector<uint32_t> prim_refs_;
   mutable std::vector<BvhNode> nodes_;       ///< 2N slots; slot 0 is the root, slot 1 unused
   mutable std::vector<float> build_area_;    ///< surface area when the node was split
