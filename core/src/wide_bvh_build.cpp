@@ -92,9 +92,9 @@ class Builder {
     const float area = r.box.surface_area();
     float best_cost = kInfinity;
     int best_axis = -1, best_bin = 0;
-    struct Bin {
-      Aabb box;
-      uint32_t count = 0;
+    struct Bin {  // trivial: only the first `bins` are set, not all 256 at every split
+      glm::vec3 lo, hi;
+      uint32_t count;
     };
     std::array<Bin, 256> bin;
     std::array<float, 256> right_area;
@@ -103,17 +103,18 @@ class Builder {
       const float lo = r.centroids.lo[a], extent = r.centroids.hi[a] - lo;
       if (!(extent > 0.0f)) continue;
       const float scale = static_cast<float>(bins) / extent;
-      for (int b = 0; b < bins; ++b) bin[b] = Bin{};
+      for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0};
       for (uint32_t i = r.begin; i < r.end; ++i) {
         const uint32_t p = prims_[i];
         const int b = bin_of(centroid(p)[a], lo, scale, bins);
-        bin[b].box.extend(box_[p]);
+        bin[b].lo = glm::min(bin[b].lo, box_[p].lo);
+        bin[b].hi = glm::max(bin[b].hi, box_[p].hi);
         ++bin[b].count;
       }
       Aabb acc;
       uint32_t cnt = 0;
       for (int b = bins - 1; b > 0; --b) {
-        acc.extend(bin[b].box);
+        acc.extend(Aabb{bin[b].lo, bin[b].hi});
         cnt += bin[b].count;
         right_area[b] = acc.surface_area();
         right_count[b] = cnt;
@@ -121,7 +122,7 @@ class Builder {
       acc = Aabb{};
       cnt = 0;
       for (int b = 1; b < bins; ++b) {  // split between bins b - 1 and b
-        acc.extend(bin[b - 1].box);
+        acc.extend(Aabb{bin[b - 1].lo, bin[b - 1].hi});
         cnt += bin[b - 1].count;
         if (cnt == 0 || right_count[b] == 0) continue;
         const float cost = acc.surface_area() * leaf_cost(cnt) + right_area[b] * leaf_cost(right_count[b]);
