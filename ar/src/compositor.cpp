@@ -434,6 +434,89 @@ Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, 
               to_pixel(std::ceil(maxy) + 2.0f, h)};
 }
 
+/// The pixels whose real points can lie in one box's shadow volume from one light, row by row: the
+/// volume projects into the convex hull of the box's corners and their vanishing points away from
+/// the light, whose rows are narrower than its rectangle (shadow_rect). Each row's span is the
+/// hull's extent over the rows within 2 px, widened by 2 px, as the rectangle is; the whole
+/// rectangle's width where a point lies behind the camera (the rectangle is then the image).
+struct VolumeSpans {
+  Rect rect;
+  std::vector<int> x0, x1;  ///< per row of rect: columns [x0, x1)
+  bool contains(int x, int y) const {
+    if (y < rect.y0 || y >= rect.y1) return false;
+    const size_t r = static_cast<size_t>(y - rect.y0);
+    return x >= x0[r] && x < x1[r];
+  }
+};
+
+VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, int w, int h) {
+  VolumeSpans s;
+  s.rect = shadow_rect(cam, {b}, {l}, w, h);
+  if (s.rect.empty()) return s;
+  const size_t rows = static_cast<size_t>(s.rect.y1 - s.rect.y0);
+  s.x0.assign(rows, s.rect.x0);
+  s.x1.assign(rows, s.rect.x1);
+  // the projected corners and vanishing points, as shadow_rect works them out, in double
+  const glm::mat3 to_cam = glm::transpose(cam.rotation);
+  std::vector<glm::dvec2> pts;
+  for (int c = 0; c < 8; ++c) {
+    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
+    for (const glm::vec3& q : {to_cam * (p - cam.position), to_cam * (p - l.position)}) {
+      if (q.z <= 1e-4f) return s;  // behind the camera: the rectangle
+      pts.emplace_back(static_cast<double>(cam.fx * q.x / q.z + cam.cx), static_cast<double>(cam.fy * q.y / q.z + cam.cy));
+    }
+  }
+  for (const glm::dvec2& p : pts) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return s;
+  }
+  // convex hull (A. M. Andrew's monotone chain), counter-clockwise
+  std::sort(pts.begin(), pts.end(), [](const glm::dvec2& a, const glm::dvec2& c) { return a.x < c.x || (a.x == c.x && a.y < c.y); });
+  auto cross = [](const glm::dvec2& o, const glm::dvec2& a, const glm::dvec2& c) {
+    return (a.x - o.x) * (c.y - o.y) - (a.y - o.y) * (c.x - o.x);
+  };
+  std::vector<glm::dvec2> hull(2 * pts.size());
+  size_t k = 0;
+  for (size_t i = 0; i < pts.size(); ++i) {
+    while (k >= 2 && cross(hull[k - 2], hull[k - 1], pts[i]) <= 0.0) --k;
+    hull[k++] = pts[i];
+  }
+  for (size_t i = pts.size() - 1, t = k + 1; i-- > 0;) {
+    while (k >= t && cross(hull[k - 2], hull[k - 1], pts[i]) <= 0.0) --k;
+    hull[k++] = pts[i];
+  }
+  hull.resize(k > 1 ? k - 1 : k);
+  // each row: the hull clipped to the band of rows y - 2 .. y + 2, its extent in x
+  std::vector<glm::dvec2> a, c;
+  for (int y = s.rect.y0; y < s.rect.y1; ++y) {
+    a = hull;
+    for (const double sign : {1.0, -1.0}) {
+      const double bound = sign > 0 ? y - 2.0 : -(y + 2.0);  // keep sign * v >= bound
+      c.clear();
+      for (size_t i = 0; i < a.size(); ++i) {
+        const glm::dvec2& p = a[i];
+        const glm::dvec2& q = a[(i + 1) % a.size()];
+        const double dp = sign * p.y - bound, dq = sign * q.y - bound;
+        if (dp >= 0.0) c.push_back(p);
+        if ((dp < 0.0) != (dq < 0.0)) c.push_back(p + (q - p) * (dp / (dp - dq)));
+      }
+      a.swap(c);
+    }
+    const size_t r = static_cast<size_t>(y - s.rect.y0);
+    if (a.empty()) {
+      s.x1[r] = s.x0[r];
+      continue;
+    }
+    double lo = a[0].x, hi = a[0].x;
+    for (const glm::dvec2& p : a) {
+      lo = std::min(lo, p.x);
+      hi = std::max(hi, p.x);
+    }
+    s.x0[r] = std::max(s.rect.x0, to_pixel(static_cast<float>(std::floor(lo) - 2.0), w));
+    s.x1[r] = std::min(s.rect.x1, to_pixel(static_cast<float>(std::ceil(hi) + 2.0), w));
+  }
+  return s;
+}
+
 /// Where the fused room or a support plane knows the real surface better than this frame's sensor:
 /// a pixel of `region` whose sensor depth lies within the noise of the model's depth along its ray
 /// (3 sigma of Nguyen et al.'s model plus the disparity step, 0.4 % of z^2 a metre) takes the
@@ -548,15 +631,14 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   // each box's shadow volume from each light has a screen rectangle of its own, much smaller than
   // their union: a point is tested against a box only inside that box's rectangle
   const core::Camera& cam = shader.cam;
-  std::vector<Rect> volume(boxes.size() * lights.size());
+  std::vector<VolumeSpans> volume(boxes.size() * lights.size());
   for (size_t bi = 0; bi < boxes.size(); ++bi)
-    for (size_t li = 0; li < lights.size(); ++li) volume[bi * lights.size() + li] = shadow_rect(cam, {boxes[bi]}, {lights[li]}, w, h);
+    for (size_t li = 0; li < lights.size(); ++li) volume[bi * lights.size() + li] = shadow_spans(cam, boxes[bi], lights[li], w, h);
   // whether the segment from p to light li (p + to) meets a box; (x, y) is p's pixel
   auto meets_virtual = [&](int x, int y, size_t li, const glm::vec3& p, const glm::vec3& to) {
     const glm::vec3 inv = 1.0f / to;
     for (size_t bi = 0; bi < boxes.size(); ++bi) {
-      const Rect& r = volume[bi * lights.size() + li];
-      if (x < r.x0 || x >= r.x1 || y < r.y0 || y >= r.y1) continue;
+      if (!volume[bi * lights.size() + li].contains(x, y)) continue;
       if (core::segment_meets_box(p, inv, 0.0f, 1.0f, boxes[bi])) return true;
     }
     return false;
@@ -607,7 +689,7 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
     for (int y = t.y0; y < t.y1; ++y) {
       for (int x = t.x0; x < t.x1; ++x) {
         bool inside = false;  // in some shadow volume's rectangle
-        for (const Rect& r : volume) inside = inside || (x >= r.x0 && x < r.x1 && y >= r.y0 && y < r.y1);
+        for (const VolumeSpans& v : volume) inside = inside || v.contains(x, y);
         if (!inside) continue;
         glm::vec3 p;
         if (!point(x, y, p)) continue;
