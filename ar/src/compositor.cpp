@@ -452,7 +452,10 @@ struct VolumeSpans {
 VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, int w, int h) {
   VolumeSpans s;
   s.rect = shadow_rect(cam, {b}, {l}, w, h);
-  if (s.rect.empty()) return s;
+  if (s.rect.empty()) {
+    s.rect = Rect{0, 0, 0, 0};  // no rows either (it can be empty in width only): contains nothing
+    return s;
+  }
   const size_t rows = static_cast<size_t>(s.rect.y1 - s.rect.y0);
   s.x0.assign(rows, s.rect.x0);
   s.x1.assign(rows, s.rect.x1);

@@ -235,6 +235,27 @@ TEST(Compositor, ObjectsProjectingFarOffScreenKeepTheirPixelsAndShadows) {
   EXPECT_EQ(check.wrong, 0) << "pixels darkened outside the analytic shadow, or left lit inside it";
 }
 
+/// An object whose shadow volume projects wholly beside the image (its rows overlap the image's, its
+/// columns lie left of it) changes nothing on screen. Its screen rectangle is then empty in width
+/// only; the real points' test against it once read past its (empty) row spans and crashed.
+TEST(Compositor, AShadowVolumeBesideTheImageChangesNothing) {
+  const SensorFrame frame = wall_frame();
+  const glm::vec3 far_lo(-20.0f, -0.25f, 1.3f), far_hi(-19.8f, -0.05f, 1.5f);
+  const MaterialLookup diffuse = [](const core::Hit&) { return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f), 1.5f}; };
+  auto render = [&](bool with_far) {
+    core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
+    scene.add_instance(scene.add_rigid_mesh(box(kBoxLo, kBoxHi)), glm::mat4(1.0f));
+    if (with_far) scene.add_instance(scene.add_rigid_mesh(box(far_lo, far_hi)), glm::mat4(1.0f));
+    scene.commit();
+    CompositeOptions opt = shadow_options();
+    opt.object_bounds = {core::Aabb{kBoxLo, kBoxHi}};
+    if (with_far) opt.object_bounds.push_back(core::Aabb{far_lo, far_hi});
+    return composite(frame, scene, diffuse, opt);
+  };
+  const ColorImage one = render(false), two = render(true);
+  EXPECT_TRUE(one.rgb == two.rgb) << "the object beside the image changed the picture";
+}
+
 /// A glass box given its triangles' transmittance darkens the wall where the opaque box would,
 /// but only by the light its two faces on the way (in and out) hold back: T^2 of the light passes.
 TEST(Compositor, GlassBoxCastsALighterShadowOnTheRealWall) {
