@@ -514,8 +514,9 @@ VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const Vir
       lo = std::min(lo, p.x);
       hi = std::max(hi, p.x);
     }
-    s.x0[r] = std::max(s.rect.x0, to_pixel(static_cast<float>(std::floor(lo) - 2.0), w));
-    s.x1[r] = std::min(s.rect.x1, to_pixel(static_cast<float>(std::ceil(hi) + 2.0), w));
+    // clamped while a double: the hull's x can lie far off screen
+    s.x0[r] = std::max(s.rect.x0, to_pixel(static_cast<float>(std::clamp(std::floor(lo) - 2.0, -1.0, w + 1.0)), w));
+    s.x1[r] = std::min(s.rect.x1, to_pixel(static_cast<float>(std::clamp(std::ceil(hi) + 2.0, -1.0, w + 1.0)), w));
   }
   return s;
 }
