@@ -400,45 +400,59 @@ int to_pixel(float x, int n) {
   return x < static_cast<float>(n) ? static_cast<int>(x) : n;
 }
 
-/// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
-/// shadow volume (the box, and its corners pushed away from the light to infinity, which project
-/// to their vanishing points). The whole image when a volume reaches behind the camera.
-Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
-                 int w, int h) {
-  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+/// The 16 screen points a box's shadow volume from a light projects to: each corner of the box,
+/// and the corner pushed away from the light to infinity (its vanishing point). False when one
+/// lies behind the camera, or the light sits on a corner: the volume can then reach anywhere.
+bool volume_points(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, glm::vec2 (&uv)[16]) {
   const glm::mat3 to_cam = glm::transpose(cam.rotation);
   // a point, or a direction (its vanishing point), in camera space; false behind the camera
-  auto add = [&](const glm::vec3& c) {
+  auto project = [&](const glm::vec3& c, glm::vec2& out) {
     if (c.z <= 1e-4f) return false;
-    const float u = cam.fx * c.x / c.z + cam.cx, v = cam.fy * c.y / c.z + cam.cy;
-    minx = std::min(minx, u);
-    maxx = std::max(maxx, u);
-    miny = std::min(miny, v);
-    maxy = std::max(maxy, v);
+    out = glm::vec2(cam.fx * c.x / c.z + cam.cx, cam.fy * c.y / c.z + cam.cy);
     return true;
   };
-  for (const core::Aabb& b : boxes) {
-    if (b.empty()) continue;
-    for (const VirtualLight& l : lights) {
-      for (int c = 0; c < 8; ++c) {
-        const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-        if (!add(to_cam * (p - cam.position))) return Rect{0, 0, w, h};
-        const glm::vec3 away = p - l.position;
-        if (glm::dot(away, away) == 0.0f) return Rect{0, 0, w, h};
-        if (!add(to_cam * away)) return Rect{0, 0, w, h};
-      }
-    }
+  for (int c = 0; c < 8; ++c) {
+    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
+    const glm::vec3 away = p - l.position;
+    if (glm::dot(away, away) == 0.0f) return false;
+    if (!project(to_cam * (p - cam.position), uv[2 * c]) || !project(to_cam * away, uv[2 * c + 1])) return false;
   }
+  return true;
+}
+
+/// The pixel rectangle around projected points spanning [minx, maxx] x [miny, maxy], 2 px wider
+/// on each side; empty when there are none (minx > maxx).
+Rect rect_around(float minx, float miny, float maxx, float maxy, int w, int h) {
   if (!(minx <= maxx)) return Rect{0, 0, 0, 0};
   return Rect{to_pixel(std::floor(minx) - 2.0f, w), to_pixel(std::floor(miny) - 2.0f, h), to_pixel(std::ceil(maxx) + 2.0f, w),
               to_pixel(std::ceil(maxy) + 2.0f, h)};
 }
 
+/// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
+/// shadow volume (volume_points). The whole image when a volume reaches behind the camera.
+Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
+                 int w, int h) {
+  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+  for (const core::Aabb& b : boxes) {
+    if (b.empty()) continue;
+    for (const VirtualLight& l : lights) {
+      glm::vec2 uv[16];
+      if (!volume_points(cam, b, l, uv)) return Rect{0, 0, w, h};
+      for (const glm::vec2& q : uv) {
+        minx = std::min(minx, q.x);
+        maxx = std::max(maxx, q.x);
+        miny = std::min(miny, q.y);
+        maxy = std::max(maxy, q.y);
+      }
+    }
+  }
+  return rect_around(minx, miny, maxx, maxy, w, h);
+}
+
 /// The pixels whose real points can lie in one box's shadow volume from one light, row by row: the
-/// volume projects into the convex hull of the box's corners and their vanishing points away from
-/// the light, whose rows are narrower than its rectangle (shadow_rect). Each row's span is the
-/// hull's extent over the rows within 2 px, widened by 2 px, as the rectangle is; the whole
-/// rectangle's width where a point lies behind the camera (the rectangle is then the image).
+/// volume projects into the convex hull of its volume_points, whose rows are narrower than its
+/// rectangle (shadow_rect). Each row's span is the hull's extent over the rows within 2 px,
+/// widened by 2 px, as the rectangle is; the whole image where the volume reaches behind the camera.
 struct VolumeSpans {
   Rect rect;
   std::vector<int> x0, x1;  ///< per row of rect: columns [x0, x1)
@@ -451,7 +465,27 @@ struct VolumeSpans {
 
 VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, int w, int h) {
   VolumeSpans s;
-  s.rect = shadow_rect(cam, {b}, {l}, w, h);
+  glm::vec2 uv[16];
+  if (b.empty()) {
+    s.rect = Rect{0, 0, 0, 0};
+    return s;
+  }
+  if (!volume_points(cam, b, l, uv)) {
+    s.rect = Rect{0, 0, w, h};
+    s.x0.assign(static_cast<size_t>(h), 0);
+    s.x1.assign(static_cast<size_t>(h), w);
+    return s;
+  }
+  std::vector<glm::dvec2> pts;
+  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+  for (const glm::vec2& q : uv) {
+    minx = std::min(minx, q.x);
+    maxx = std::max(maxx, q.x);
+    miny = std::min(miny, q.y);
+    maxy = std::max(maxy, q.y);
+    pts.emplace_back(q);
+  }
+  s.rect = rect_around(minx, miny, maxx, maxy, w, h);
   if (s.rect.empty()) {
     s.rect = Rect{0, 0, 0, 0};  // no rows either (it can be empty in width only): contains nothing
     return s;
@@ -459,18 +493,8 @@ VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const Vir
   const size_t rows = static_cast<size_t>(s.rect.y1 - s.rect.y0);
   s.x0.assign(rows, s.rect.x0);
   s.x1.assign(rows, s.rect.x1);
-  // the projected corners and vanishing points, as shadow_rect works them out, in double
-  const glm::mat3 to_cam = glm::transpose(cam.rotation);
-  std::vector<glm::dvec2> pts;
-  for (int c = 0; c < 8; ++c) {
-    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-    for (const glm::vec3& q : {to_cam * (p - cam.position), to_cam * (p - l.position)}) {
-      if (q.z <= 1e-4f) return s;  // behind the camera: the rectangle
-      pts.emplace_back(static_cast<double>(cam.fx * q.x / q.z + cam.cx), static_cast<double>(cam.fy * q.y / q.z + cam.cy));
-    }
-  }
   for (const glm::dvec2& p : pts) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return s;
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return s;  // the rectangle
   }
   // convex hull (A. M. Andrew's monotone chain), counter-clockwise
   std::sort(pts.begin(), pts.end(), [](const glm::dvec2& a, const glm::dvec2& c) { return a.x < c.x || (a.x == c.x && a.y < c.y); });
