@@ -27,7 +27,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-30}
 shift || true
-all=(aff ppm gltf ar_scene tum oni oni_codecs intrinsics)
+all=(aff ppm gltf ar_scene tum oni oni_codecs intrinsics png)
 harnesses=("$@")
 (( ${#harnesses[@]} )) || harnesses=("${all[@]}")
 command -v clang++ > /dev/null || { echo "fuzz.sh: clang++ is missing (scripts/install-deps.sh installs clang)"; exit 1; }
@@ -44,13 +44,14 @@ dict_of() {
     gltf|ar_scene) echo tests/fuzz/dict/json.dict ;;
     tum) echo tests/fuzz/dict/tum.dict ;;
     intrinsics) echo tests/fuzz/dict/intrinsics.dict ;;
+    png) echo tests/fuzz/dict/png.dict ;;
   esac
 }
 # executions of the seeded (CI) run: about 30 s of each harness on a 2-core AMD EPYC with AVX2
 ci_runs_of() {
   case $1 in
     aff) echo 100000 ;; ppm) echo 500000 ;; gltf) echo 90000 ;; ar_scene) echo 120000 ;;
-    tum) echo 400000 ;; oni) echo 90000 ;; oni_codecs) echo 2000000 ;; intrinsics) echo 200000 ;;
+    tum) echo 400000 ;; oni) echo 90000 ;; oni_codecs) echo 2000000 ;; intrinsics) echo 200000 ;; png) echo 100000 ;;
   esac
 }
 fuzz_one() {

@@ -6,7 +6,7 @@ export DEBIAN_FRONTEND=noninteractive
 packages=(
   build-essential cmake ninja-build pkg-config
   libglm-dev libtbb-dev libcli11-dev nlohmann-json3-dev
-  libeigen3-dev libopencv-dev libopencv-contrib-dev libopenni2-dev libtinygltf-dev libopen3d-dev
+  libeigen3-dev libopencv-dev libopencv-contrib-dev libopenni2-dev libdeflate-dev libtinygltf-dev libopen3d-dev
   libgtest-dev libgmock-dev
   libembree-dev
   xvfb  # the replay viewer's test runs under a virtual display

@@ -1,6 +1,7 @@
 #include "cv_convert.h"
 
 #include "artrace/io/parse_error.h"
+#include "png_decode.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -116,6 +117,7 @@ cv::Mat read_image_file(const std::filesystem::path& path, int flags) {
   in.seekg(0);
   if (!in.read(reinterpret_cast<char*>(bytes.data()), size)) return cv::Mat();
   if (const std::string bad = image_header_error(bytes.data(), bytes.size()); !bad.empty()) throw ParseError(path.string(), 0, 0, "the image " + bad);
+  if (cv::Mat fast = decode_png(bytes.data(), bytes.size(), flags); !fast.empty()) return fast;
   return cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<uint8_t*>(bytes.data())), flags);
 }
 

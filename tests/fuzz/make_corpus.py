@@ -32,6 +32,31 @@ def tiny_png(w=4, h=4):
         chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
 
 
+def png_seeds():
+    """Small PNGs in the layouts the PNG decoder takes, every row filter and split IDATs, with the
+    harness's first byte (1: decoded as colour, 0: as 16-bit depth) in front."""
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+
+    def png(w, h, depth, colour_type, extra=b""):
+        bpp = {0: 1, 2: 3, 4: 2, 6: 4}[colour_type] * depth // 8
+        # any filtered bytes decode: row y gets filter y % 5 over a fixed pattern
+        raw = b"".join(bytes([y % 5]) + bytes((x * 37 + y * 101) % 256 for x in range(w * bpp)) for y in range(h))
+        z = zlib.compress(raw, 6)
+        return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, depth, colour_type, 0, 0, 0)) + extra + \
+            chunk(b"IDAT", z[:len(z) // 2]) + chunk(b"IDAT", z[len(z) // 2:]) + chunk(b"IEND", b"")
+    # and two image descriptions the harness writes as PNGs (first byte bit 1): width, height,
+    # layout, IDAT piece, then the filtered rows
+    described = {"described_rgb": b"\x03" + bytes([5, 4, 2, 1]) + bytes(range(80)),
+                 "described_depth": b"\x02" + bytes([6, 3, 4, 0]) + bytes((i * 7) % 256 for i in range(60))}
+    return {**described,
+            "rgb8": b"\x01" + png(6, 5, 8, 2),
+            "rgba8": b"\x01" + png(5, 5, 8, 6, chunk(b"gAMA", b"\x00\x00\xb1\x8f")),
+            "grey8": b"\x01" + png(7, 3, 8, 0),
+            "grey_alpha8": b"\x01" + png(4, 6, 8, 4, chunk(b"tEXt", b"k\x00v")),
+            "depth16": b"\x00" + png(6, 5, 16, 0)}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--artrace", default=str(top / "build/tools/artrace"))
@@ -85,6 +110,10 @@ def main():
     put("gltf", "texture_file.gltf", json.dumps({
         "asset": {"version": "2.0"}, "images": [{"uri": "texture.png"}], "textures": [{"source": 0}],
         "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]}))
+
+    # PNG frames (the decoder on libdeflate, against OpenCV's)
+    for name, data in png_seeds().items():
+        put("png", name, data)
 
     # AR scenes: the demo's, with the models beside the scene (where the harness puts them)
     for f in ["demo.json", "two_models.json"]:
