@@ -129,8 +129,6 @@ cv::Mat decode_png(const uint8_t* d, size_t size, int flags) {
   const size_t raw_size = (row_bytes + 1) * height;
   const size_t idat_limit = raw_size + 6 + 5 * (raw_size / 32566 + 1);  // stored blocks' overhead at most
 
-  // the chunks up to IEND: IDAT's data gathered (its chunks must follow one another), the
-  // ancillary chunks skipped as libpng does for OpenCV (none changes the pixels it asks for)
   // per-thread buffers, reused from frame to frame (no allocation, no zeroing)
   thread_local std::vector<uint8_t> stream, raw;
   struct Trim {  // a rare large image's buffers are not kept
@@ -141,6 +139,8 @@ cv::Mat decode_png(const uint8_t* d, size_t size, int flags) {
     }
   } trim;
   stream.clear();
+  // the chunks up to IEND: IDAT's data gathered (its chunks must follow one another), the
+  // ancillary chunks skipped as libpng does for OpenCV (none changes the pixels it asks for)
   bool seen_idat = false, idat_done = false, seen_iend = false;
   size_t pos = 8 + 25;
   while (pos + 12 <= size) {
