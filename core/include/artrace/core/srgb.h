@@ -17,10 +17,11 @@ inline uint8_t linear_to_srgb8_formula(float linear) {
 
 /// The same byte by its 255 thresholds: up[k - 1] is the least float in [0, 1] that the formula
 /// takes to k or more, found by bisection over the floats' bit patterns (which order positive
-/// floats as their values). The formula never decreases (checked over every float of [0, 1]:
-/// `SrgbTest`), so counting the thresholds at or below a value gives the formula's byte exactly,
-/// with eight comparisons instead of a pow and a round. It runs for every blended pixel and every
-/// texel of a texture's mip chain.
+/// floats as their values). The formula never decreases (checked by hand over every float of
+/// [0, 1]; `Srgb.*` checks the floats near every step and a stride through the rest), so counting
+/// the thresholds at or below a value gives the formula's byte exactly, with eight comparisons
+/// instead of a pow and a round. It runs for every blended pixel and every texel of a texture's
+/// mip chain.
 inline uint8_t linear_to_srgb8(float linear) {
   static const std::array<float, 255> up = [] {
     std::array<float, 255> t{};
