@@ -37,8 +37,7 @@ ar::DepthImage depth_from_u16(const cv::Mat& raw, double per_metre) {
 }
 
 std::string png_chunk_error(const uint8_t* d, size_t size) {
-  static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
-  if (size < 8 || !std::equal(kPng, kPng + 8, d)) return "";
+  if (size < 8 || !std::equal(kPngSignature, kPngSignature + 8, d)) return "";
   size_t pos = 8;
   while (pos + 8 <= size) {
     const uint64_t length = static_cast<uint64_t>(d[pos]) << 24 | d[pos + 1] << 16 | d[pos + 2] << 8 | d[pos + 3];
@@ -56,8 +55,7 @@ std::string png_chunk_error(const uint8_t* d, size_t size) {
 std::optional<ImageSize> declared_image_size(const uint8_t* d, size_t size) {
   const auto be16 = [&](size_t i) { return static_cast<uint32_t>(d[i] << 8 | d[i + 1]); };
   const auto be32 = [&](size_t i) { return be16(i) << 16 | be16(i + 2); };
-  static const uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
-  if (size >= 24 && std::equal(kPng, kPng + 8, d) && std::equal(d + 12, d + 16, "IHDR")) return ImageSize{be32(16), be32(20)};
+  if (size >= 24 && std::equal(kPngSignature, kPngSignature + 8, d) && std::equal(d + 12, d + 16, "IHDR")) return ImageSize{be32(16), be32(20)};
   // WebP (EXT_texture_webp): a RIFF file whose first chunk is VP8 (lossy: 14-bit sizes in the
   // key frame header), VP8L (lossless: 14-bit sizes less one, packed) or VP8X (24-bit canvas sizes
   // less one)

@@ -31,6 +31,8 @@ std::optional<ImageSize> declared_image_size(const uint8_t* data, size_t size);
 std::string png_chunk_error(const uint8_t* data, size_t size);
 /// The largest image side the readers take (GPUs' usual texture limit).
 constexpr uint32_t kMaxImageSide = 16384;
+/// The eight bytes a PNG file starts with.
+inline constexpr uint8_t kPngSignature[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
 /// What is wrong with an image's header before OpenCV may decode it ("is a broken PNG: ..." for a
 /// chunk running past the data, "declares WxH pixels ..." for a side of 0 or beyond kMaxImageSide);
 /// "" when nothing is (including formats whose header this does not read).

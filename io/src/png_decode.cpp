@@ -1,5 +1,7 @@
 #include "png_decode.h"
 
+#include "cv_convert.h"
+
 #include <libdeflate.h>
 #include <opencv2/imgcodecs.hpp>
 
@@ -13,10 +15,8 @@ namespace artrace::io {
 
 namespace {
 
-constexpr uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
-constexpr uint32_t kMaxSide = 16384;                 // beyond it the readers refuse the image anyway
-constexpr uint32_t kMaxChunk = 0x7FFFFFFFu;          // PNG's chunk lengths are 31-bit
-constexpr uint32_t kMaxAncillaryChunk = 8000000;     // libpng's default limit on a chunk it reads
+constexpr uint32_t kMaxChunk = 0x7FFFFFFFu;       // PNG's chunk lengths are 31-bit
+constexpr uint32_t kMaxAncillaryChunk = 8000000;  // libpng's default limit on a chunk it reads
 
 uint32_t be32(const uint8_t* p) {
   return static_cast<uint32_t>(p[0]) << 24 | static_cast<uint32_t>(p[1]) << 16 | static_cast<uint32_t>(p[2]) << 8 | p[3];
@@ -113,13 +113,13 @@ bool unfilter(uint8_t* raw, size_t height, size_t row_bytes, size_t bpp) {
 
 cv::Mat decode_png(const uint8_t* d, size_t size, int flags) {
   const bool want_colour = flags == cv::IMREAD_COLOR, want_depth = flags == (cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-  if ((!want_colour && !want_depth) || size < 8 + 25 || std::memcmp(d, kSignature, 8) != 0) return {};
+  if ((!want_colour && !want_depth) || size < 8 + 25 || std::memcmp(d, kPngSignature, 8) != 0) return {};
   // IHDR first, 13 bytes
   if (be32(d + 8) != 13 || !is_type(d + 12, "IHDR") || !crc_ok(d + 8, 13)) return {};
   const uint8_t* h = d + 16;
   const uint32_t width = be32(h), height = be32(h + 4);
   const uint8_t depth = h[8], colour_type = h[9];
-  if (width == 0 || height == 0 || width > kMaxSide || height > kMaxSide) return {};
+  if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) return {};
   if (h[10] != 0 || h[11] != 0 || h[12] != 0) return {};  // deflate, adaptive filtering, not interlaced
   int channels = 0;
   if (want_colour && depth == 8) channels = colour_type == 0 ? 1 : colour_type == 2 ? 3 : colour_type == 4 ? 2 : colour_type == 6 ? 4 : 0;

@@ -23,7 +23,7 @@ constexpr uint32_t kOne = 0x3F800000u;  // 1.0f
 /// the rest; values outside [0, 1]. (Every float of [0, 1], about 1.07 billion, agreed when
 /// checked by hand on 2026-12-04, and the formula never decreased over them.)
 TEST(Srgb, LinearToSrgb8IsTheFormulaOnEveryFloatNearAStepAndAcrossTheRange) {
-  size_t checked = 0, steps = 0;
+  size_t checked = 0;
   int previous = 0;
   for (uint32_t b = 0; b <= kOne; b += 1021) {
     const float c = from_bits(b);
@@ -41,13 +41,11 @@ TEST(Srgb, LinearToSrgb8IsTheFormulaOnEveryFloatNearAStepAndAcrossTheRange) {
       if (linear_to_srgb8_formula(from_bits(mid)) >= k) hi = mid;
       else lo = mid + 1;
     }
-    ++steps;
     for (uint32_t b = lo > 64 ? lo - 64 : 0; b <= std::min(kOne, lo + 64); ++b) {
       ASSERT_EQ(linear_to_srgb8(from_bits(b)), linear_to_srgb8_formula(from_bits(b))) << "near the step to " << k;
       ++checked;
     }
   }
-  EXPECT_EQ(steps, 255u);
   EXPECT_GT(checked, 1000000u);
   for (const float c : {-1.0f, -0.0f, 1.0f, 1.0000001f, 2.0f, 1e30f, -std::numeric_limits<float>::infinity(),
                         std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::denorm_min()}) {

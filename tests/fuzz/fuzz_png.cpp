@@ -10,6 +10,7 @@
 //     RGB, RGBA; 16-bit grey), how the stream is split into IDATs, then the filtered rows
 //     themselves (filter bytes included: a wrong one must be declined), compressed with libdeflate.
 #include "../../io/src/png_decode.h"
+#include "../png_writer.h"
 
 #include <libdeflate.h>
 #include <opencv2/imgcodecs.hpp>
@@ -22,20 +23,10 @@
 
 namespace {
 
-using Bytes = std::vector<uint8_t>;
-
-void put32(Bytes& o, uint32_t v) {
-  for (int s = 24; s >= 0; s -= 8) o.push_back(static_cast<uint8_t>(v >> s));
-}
-uint32_t get32(const uint8_t* p) { return uint32_t{p[0]} << 24 | uint32_t{p[1]} << 16 | uint32_t{p[2]} << 8 | p[3]; }
-
-void put_chunk(Bytes& out, const char* type, const uint8_t* data, size_t n) {
-  put32(out, static_cast<uint32_t>(n));
-  const size_t start = out.size();
-  out.insert(out.end(), type, type + 4);
-  out.insert(out.end(), data, data + n);
-  put32(out, static_cast<uint32_t>(libdeflate_crc32(0, out.data() + start, n + 4)));
-}
+using artrace::test::Bytes;
+using artrace::test::get32;
+using artrace::test::put32;
+using artrace::test::put_chunk;
 
 /// Every chunk that fits in the file gets the CRC of its type and data.
 void repair_crcs(Bytes& f) {
@@ -61,10 +52,7 @@ Bytes write_png(const uint8_t* d, size_t n) {
   Bytes raw(row * h, 0);
   std::copy(d + 4, d + 4 + std::min(n - 4, raw.size()), raw.begin());
   for (size_t y = 0; y < h; ++y) raw[y * row] = static_cast<uint8_t>(raw[y * row] % 6);  // filter types 0-4, and 5
-  libdeflate_compressor* c = libdeflate_alloc_compressor(6);
-  Bytes z(libdeflate_zlib_compress_bound(c, raw.size()));
-  z.resize(libdeflate_zlib_compress(c, raw.data(), raw.size(), z.data(), z.size()));
-  libdeflate_free_compressor(c);
+  const Bytes z = artrace::test::zlib_compress(raw);
   Bytes f = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
   Bytes ihdr;
   put32(ihdr, w);

@@ -5,6 +5,7 @@
 // come out of read_image_file exactly as OpenCV decodes it.
 #include "../../io/src/cv_convert.h"
 #include "../../io/src/png_decode.h"
+#include "../png_writer.h"
 #include "../test_util.h"
 
 #include <libdeflate.h>
@@ -23,27 +24,11 @@
 namespace artrace::io {
 namespace {
 
-using Bytes = std::vector<uint8_t>;
+using test::Bytes;
+using test::put32;
+using test::zlib_compress;
 
-void put32(Bytes& o, uint32_t v) {
-  for (int s = 24; s >= 0; s -= 8) o.push_back(static_cast<uint8_t>(v >> s));
-}
-
-void put_chunk(Bytes& out, const std::string& type, const Bytes& data) {
-  put32(out, static_cast<uint32_t>(data.size()));
-  Bytes body(type.begin(), type.end());
-  body.insert(body.end(), data.begin(), data.end());
-  out.insert(out.end(), body.begin(), body.end());
-  put32(out, static_cast<uint32_t>(libdeflate_crc32(0, body.data(), body.size())));
-}
-
-Bytes zlib_compress(const Bytes& raw) {
-  libdeflate_compressor* c = libdeflate_alloc_compressor(6);
-  Bytes out(libdeflate_zlib_compress_bound(c, raw.size()));
-  out.resize(libdeflate_zlib_compress(c, raw.data(), raw.size(), out.data(), out.size()));
-  libdeflate_free_compressor(c);
-  return out;
-}
+void put_chunk(Bytes& out, const std::string& type, const Bytes& data) { test::put_chunk(out, type.c_str(), data.data(), data.size()); }
 
 /// The specification's predictor for filter type f (ISO/IEC 15948, 9.2-9.4): a the byte a pixel to
 /// the left, b the byte above, c the byte above and to the left.
@@ -142,7 +127,6 @@ TEST(PngDecode, EveryFilterAndLayoutGivesTheWrittenPixelsAsOpenCvDoes) {
   };
   const Layout layouts[] = {{8, 0, kColour}, {8, 4, kColour}, {8, 2, kColour}, {8, 6, kColour}, {16, 0, kDepth}};
   const std::pair<uint32_t, uint32_t> sizes[] = {{1, 1}, {37, 23}, {64, 5}};
-  int cases = 0;
   for (const Layout& l : layouts) {
     for (const auto& [w, h] : sizes) {
       for (int shift = 0; shift <= 5; ++shift) {
@@ -177,11 +161,9 @@ TEST(PngDecode, EveryFilterAndLayoutGivesTheWrittenPixelsAsOpenCvDoes) {
             }
           }
         }
-        ++cases;
       }
     }
   }
-  EXPECT_EQ(cases, 5 * 3 * 6);
 }
 
 /// Files the decoder must decline, and read_image_file's answer for each is OpenCV's.
@@ -192,7 +174,8 @@ TEST(PngDecode, DeclinesWhatItDoesNotTakeAndOpenCvAnswers) {
   base.height = 9;
   base.samples = test_samples(base, rng);
   base.idat_piece = 50;
-  ASSERT_FALSE(decode_png(base.file().data(), base.file().size(), kColour).empty());
+  const Bytes good = base.file();
+  ASSERT_FALSE(decode_png(good.data(), good.size(), kColour).empty());
 
   std::vector<std::pair<std::string, Bytes>> cases;
   auto with = [&](const std::string& name, auto change) {
@@ -231,21 +214,20 @@ TEST(PngDecode, DeclinesWhatItDoesNotTakeAndOpenCvAnswers) {
     small[1] = static_cast<uint8_t>(small[1] + (31 - (small[0] * 256 + small[1]) % 31) % 31);
     cases.push_back({"16 KiB zlib window", base.file(small)});
   }
-  const Bytes good = base.file();
   {
     Bytes f = good;
     f[8 + 25 + 8 + 50] ^= 0x40;  // the first IDAT's CRC (its 50 bytes of data intact)
     cases.push_back({"IDAT CRC", f});
-    f = good;
-    f[8 + 8 + 9] = 3;  // colour type 3 (palette), IHDR's CRC made again below
-    const uint32_t crc = static_cast<uint32_t>(libdeflate_crc32(0, f.data() + 12, 17));
-    for (int k = 0; k < 4; ++k) f[29 + k] = static_cast<uint8_t>(crc >> (24 - 8 * k));
-    cases.push_back({"palette colour type", f});
-    f = good;
-    f[8 + 8 + 12] = 1;  // interlaced
-    const uint32_t crc2 = static_cast<uint32_t>(libdeflate_crc32(0, f.data() + 12, 17));
-    for (int k = 0; k < 4; ++k) f[29 + k] = static_cast<uint8_t>(crc2 >> (24 - 8 * k));
-    cases.push_back({"interlaced", f});
+    // one byte of IHDR's data (from byte 16) changed, its CRC (bytes 29-32) made again
+    auto with_ihdr = [&](const std::string& name, size_t at, uint8_t value) {
+      Bytes g = good;
+      g[16 + at] = value;
+      const uint32_t crc = static_cast<uint32_t>(libdeflate_crc32(0, g.data() + 12, 17));
+      for (int k = 0; k < 4; ++k) g[29 + k] = static_cast<uint8_t>(crc >> (24 - 8 * k));
+      cases.push_back({name, g});
+    };
+    with_ihdr("palette colour type", 9, 3);
+    with_ihdr("interlaced", 12, 1);
     f = good;
     f.resize(f.size() - 12);
     cases.push_back({"no IEND", f});
