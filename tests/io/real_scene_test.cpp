@@ -11,6 +11,8 @@
 
 #include <fstream>
 
+#include <unistd.h>
+
 namespace artrace::io {
 namespace {
 
@@ -19,8 +21,12 @@ constexpr int kW = 320, kH = 240;
 /// A synthetic recording of the demo room: `orbit_deg` of camera motion over `frames`, the
 /// Kinect-like depth model or exact depth, written as a TUM folder.
 std::filesystem::path room_recording(const std::string& name, int frames, double orbit_deg, bool noisy) {
+  // Two tests (two processes under ctest -j) may ask for the same recording at once: each writes
+  // its own folder and renames it into place, so a folder under `name` is always complete.
   const auto dir = std::filesystem::temp_directory_path() / name;
   if (std::filesystem::exists(dir / "rgb.txt")) return dir;
+  const auto part = std::filesystem::temp_directory_path() / (name + ".partial." + std::to_string(::getpid()));
+  std::filesystem::remove_all(part);
   const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
   SynthOptions o;
   o.frames = frames;
@@ -29,8 +35,13 @@ std::filesystem::path room_recording(const std::string& name, int frames, double
   o.orbit_deg = orbit_deg;
   if (noisy) o.depth_model = ar::DepthModel{};
   Synthesizer synth(room, o);
-  auto w = make_recording_writer(dir);
-  synth.write(*w);
+  {
+    auto w = make_recording_writer(part);
+    synth.write(*w);
+  }
+  std::error_code ec;
+  std::filesystem::rename(part, dir, ec);  // fails if another process put its folder there first
+  if (ec) std::filesystem::remove_all(part);
   return dir;
 }
 
