@@ -52,7 +52,10 @@ struct Aligned {
 
 struct EmbreeBatch::Impl {
   Aligned pristine, live;
-  std::vector<int> valid;  ///< width ints a call
+  /// width ints a call. Embree wants a packet's valid mask aligned as its rays (16, 32 or 64
+  /// bytes); its AVX-512 kernels fault on a vector's 16-byte alignment
+  Aligned valid_bytes;
+  int* valid = nullptr;
   /// For each call: our packet, and the lane of its first Embree lane (width 1: the lane itself).
   std::vector<std::pair<uint32_t, int>> origin;
   size_t record = 0;  ///< bytes a call
@@ -96,7 +99,8 @@ EmbreeBatch::EmbreeBatch(const std::vector<core::RayPacket>& packets, const std:
     b.record = width == 4 ? sizeof(RTCRayHit4) : width == 8 ? sizeof(RTCRayHit8) : sizeof(RTCRayHit16);
     calls_ = b.origin.size();
     b.pristine.reset(calls_ * b.record);
-    b.valid.assign(calls_ * static_cast<size_t>(width), 0);
+    b.valid_bytes.reset(calls_ * static_cast<size_t>(width) * sizeof(int));
+    b.valid = static_cast<int*>(b.valid_bytes.data);
     auto fill = [&](auto* rh) {
       for (size_t c = 0; c < calls_; ++c) {
         const core::RayPacket& r = packets[b.origin[c].first];
