@@ -5,6 +5,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <fstream>
 
@@ -169,6 +171,35 @@ TEST(Export, RealOniRecordingThroughTheArPath) {
     ++frames;
   }
   EXPECT_EQ(frames, 4);
+  std::filesystem::remove_all(dir);
+}
+
+/// bench-core against its Embree reference, as docs/benchmarks.md runs it: it completes (Embree's
+/// 8- and 16-wide calls fault on a valid mask not aligned as the packet), and Embree's camera-ray
+/// hits and shadow answers agree with ours, where they differ brute force finding none of ours
+/// wrong.
+TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_bench_core_embree";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  for (const int lanes : {8, 16}) {
+    const auto json = dir / ("lanes" + std::to_string(lanes) + ".json");
+    const auto log = dir / "log.txt";
+    const int rc = run(std::string(ARTRACE_BINARY) + " bench-core --scene " + (kRoot / "data/scenes/room.aff").string() +
+                       " --width 96 --height 64 --runs 1 --threads 2 --verify-rays 100 --lanes " + std::to_string(lanes) +
+                       " --reference embree --json " + json.string() + " > " + log.string() + " 2>&1");
+    std::ifstream in(log);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (rc != 0 && text.find("this build has no Embree") != std::string::npos) GTEST_SKIP() << "built without Embree";
+    ASSERT_EQ(rc, 0) << text;
+    const nlohmann::json out = nlohmann::json::parse(std::ifstream(json));
+    const nlohmann::json& e = out.at("embree");
+    EXPECT_GE(e.at("primary_agreement").get<double>(), 0.999) << "lanes " << lanes;
+    EXPECT_EQ(e.at("shadow_disagreeing_lanes_wrong").at("artrace").get<size_t>(), 0u) << "lanes " << lanes;
+    for (const char* key : {"primary_single", "primary_packet_4", "primary_packet_8", "primary_packet_16", "shadow", "incoherent"})
+      EXPECT_GT(e.at("rays").at(key).get<double>(), 0.0) << key;
+  }
   std::filesystem::remove_all(dir);
 }
 
