@@ -7,6 +7,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   libglm-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libeigen3-dev libopencv-dev libopencv-contrib-dev libopenni2-dev libdeflate-dev libtinygltf-dev libopen3d-dev
+  libavformat-dev libavcodec-dev libavutil-dev libswscale-dev
   libgtest-dev libgmock-dev
   libembree-dev
   xvfb  # the replay viewer's test runs under a virtual display

@@ -1,6 +1,6 @@
 // artrace export: composites an AR scene into a recording and writes a clip (video through
-// OpenCV: H.264 where available, MPEG-4 otherwise; or numbered PNGs with a shard.json naming the
-// frames, which artrace join puts together). The output appears under its final name only when
+// FFmpeg's libraries, see clip_writer.h: H.264 where available, MPEG-4 otherwise, Motion JPEG in
+// .avi; or numbered PNGs with a shard.json naming the frames, which artrace join puts together). The output appears under its final name only when
 // complete; Ctrl-C stops cleanly and leaves nothing behind.
 #include "bench_util.h"
 #include "commands.h"
@@ -14,7 +14,6 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include <atomic>
 #include <csignal>
@@ -34,6 +33,7 @@ struct Options {
   int first = 0, last = -1;
   double fps = 30.0;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
+  ClipOptions clip;
 };
 
 void run(const Options& opt) {
@@ -56,9 +56,9 @@ void run(const Options& opt) {
   const std::filesystem::path out(opt.output);
   const bool video = is_video_path(out);
   const std::filesystem::path partial = prepare_partial(out);
-  cv::VideoWriter writer;
+  std::unique_ptr<ClipWriter> writer;
   auto cleanup = [&] {
-    writer.release();
+    writer.reset();
     std::error_code ec;
     std::filesystem::remove_all(partial, ec);
   };
@@ -98,8 +98,12 @@ void run(const Options& opt) {
       frame_ms.push_back(ms_since(t0));
       const auto tw = std::chrono::steady_clock::now();
       if (video) {
-        if (!writer.isOpened()) open_video_writer(writer, partial, out.string(), opt.fps, img.size());
-        writer.write(img);
+        if (!writer) {
+          ClipOptions clip = opt.clip;
+          clip.fps = opt.fps;
+          writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
+        }
+        writer->write(img);
       } else {
         if (!cv::imwrite(frame_png(partial, first + k).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
         width = img.cols;
@@ -112,6 +116,7 @@ void run(const Options& opt) {
                      static_cast<long long>(total), fps, (total - k - 1) / fps);
       }
     }
+    if (writer) writer->finish();
   } catch (...) {
     std::signal(SIGINT, previous);
     if (!opt.quiet) std::fprintf(stderr, "\n");
@@ -119,7 +124,6 @@ void run(const Options& opt) {
     throw;
   }
   std::signal(SIGINT, previous);
-  writer.release();
   if (!video) {
     // a folder of frames is a shard: it says which frames of which recording it holds, for join
     try {
@@ -158,6 +162,7 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
   cmd->add_option("--fps", opt->fps, "frame rate of a video clip")->capture_default_str()->check(finite_range(1.0, 1000.0));
+  add_clip_options(cmd, opt->clip);
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");

@@ -24,6 +24,7 @@ struct JoinOptions {
   std::string output, frames;
   double fps = 0.0;
   bool quiet = false;
+  ClipOptions clip;
 };
 
 void run_join(const JoinOptions& opt) {
@@ -58,7 +59,7 @@ void run_join(const JoinOptions& opt) {
   const std::filesystem::path out(opt.output);
   const bool video = is_video_path(out);
   const std::filesystem::path partial = prepare_partial(out);
-  cv::VideoWriter writer;
+  std::unique_ptr<ClipWriter> writer;
   const double fps = opt.fps > 0.0 ? opt.fps : a.fps;
   g_join_interrupted = false;
   auto previous = std::signal(SIGINT, on_join_sigint);
@@ -74,8 +75,12 @@ void run_join(const JoinOptions& opt) {
           throw std::runtime_error(src.string() + ": " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
                                    ", the shard says " + std::to_string(a.width) + "x" + std::to_string(a.height));
         }
-        if (!writer.isOpened()) open_video_writer(writer, partial, out.string(), fps, img.size());
-        writer.write(img);
+        if (!writer) {
+          ClipOptions clip = opt.clip;
+          clip.fps = fps;
+          writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
+        }
+        writer->write(img);
       } else {
         // the frames as they are (a link where the filesystem allows it, else a copy)
         std::error_code ec;
@@ -86,12 +91,12 @@ void run_join(const JoinOptions& opt) {
       }
       if (!opt.quiet) std::fprintf(stderr, "\rframe %lld/%lld   ", static_cast<long long>(k - range.first + 1), static_cast<long long>(range.end - range.first));
     }
-    writer.release();
+    if (writer) writer->finish();
     if (!video) write_shard_info({partial, a.recording, range.first, range.end, a.recording_frames, a.width, a.height, fps});
   } catch (...) {
     std::signal(SIGINT, previous);
     if (!opt.quiet) std::fprintf(stderr, "\n");
-    writer.release();
+    writer.reset();
     std::error_code ec;
     std::filesystem::remove_all(partial, ec);
     throw;
@@ -115,6 +120,7 @@ void add_join_command(CLI::App& app) {
   cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder of numbered PNGs")->required();
   cmd->add_option("--frames", opt->frames, "the frames the shards must cover, A:B (default: the whole recording)");
   cmd->add_option("--fps", opt->fps, "frame rate of a video clip (default: the shards')")->check(finite_range(1.0, 1000.0));
+  add_clip_options(cmd, opt->clip);
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
   cmd->callback([opt] { run_join(*opt); });
 }

@@ -113,16 +113,13 @@ std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_
   return out;
 }
 
-void open_video_writer(cv::VideoWriter& writer, const std::filesystem::path& file, const std::string& shown_name, double fps,
-                       cv::Size size) {
-  const std::string ext = file.extension().string();
-  for (const char* cc : {"avc1", "mp4v", "MJPG"}) {
-    if (ext != ".avi" || std::string(cc) == "MJPG") {
-      writer.open(file.string(), cv::VideoWriter::fourcc(cc[0], cc[1], cc[2], cc[3]), fps, size);
-      if (writer.isOpened()) return;
-    }
-  }
-  throw std::runtime_error(shown_name + ": OpenCV has no video encoder for " + ext);
+void add_clip_options(CLI::App* cmd, ClipOptions& clip) {
+  cmd->add_option("--preset", clip.preset, "x264's speed preset for .mp4/.mkv/.mov: ultrafast, superfast, veryfast, faster, fast, medium, slow, slower, veryslow")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo"}));
+  cmd->add_option("--crf", clip.crf, "x264's constant rate factor (0 lossless, 51 worst; 18 looks lossless)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 51));
 }
 
 bool is_video_path(const std::filesystem::path& p) {

@@ -1,6 +1,9 @@
 // Sharded export, join and batch, run as a user runs them.
 #include "../cli_util.h"
 
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
 #include <fstream>
@@ -81,6 +84,74 @@ TEST(Shards, ShardsJoinedAreTheWholeExportBitForBit) {
   int frames = 0;
   for (cv::Mat f; clip.read(f);) ++frames;
   EXPECT_EQ(frames, 30);
+  std::filesystem::remove_all(dir);
+}
+
+/// Each frame of a clip, decoded by OpenCV (FFmpeg's decoders, not the encoders that wrote it),
+/// against the PNG it was encoded from: the PSNR of the worst frame, and the number of frames.
+std::pair<double, int> clip_psnr(const std::filesystem::path& clip, const std::filesystem::path& frames, cv::Rect crop = {}) {
+  cv::VideoCapture in(clip.string());
+  EXPECT_TRUE(in.isOpened()) << clip;
+  std::vector<std::filesystem::path> files;
+  for (const auto& e : std::filesystem::directory_iterator(frames))
+    if (e.path().extension() == ".png") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  double worst = 1e9;
+  int n = 0;
+  for (cv::Mat f; in.read(f); ++n) {
+    if (n >= static_cast<int>(files.size())) break;
+    const cv::Mat png = cv::imread(files[n].string(), cv::IMREAD_COLOR);
+    const cv::Mat decoded = crop.area() > 0 ? f(crop) : f;
+    EXPECT_EQ(decoded.size(), png.size()) << clip << " frame " << n;
+    if (decoded.size() != png.size()) return {0.0, n};
+    worst = std::min(worst, cv::PSNR(decoded, png));
+  }
+  return {worst, n};
+}
+
+/// The clips join writes hold every frame of the PNGs, decoded by another library: H.264 (.mp4,
+/// .mkv) and Motion JPEG (.avi), --crf trading size for fidelity, and a frame of odd size (padded
+/// for 4:2:0) whose picture is intact in the decoded frame's top-left corner.
+TEST(Shards, ClipsHoldTheFramesTheyWereEncodedFrom) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_clips");
+  const auto frames = dir / "frames";
+  ASSERT_EQ(run(export_cmd(frames) + " > /dev/null"), 0);
+  auto join = [&](const std::filesystem::path& folder, const std::string& out, const std::string& extra) {
+    return run(bin() + " join " + folder.string() + " -o " + (dir / out).string() + " -q " + extra + " > /dev/null");
+  };
+  ASSERT_EQ(join(frames, "default.mp4", ""), 0);
+  ASSERT_EQ(join(frames, "fine.mkv", "--crf 10 --preset ultrafast"), 0);
+  ASSERT_EQ(join(frames, "mjpeg.avi", ""), 0);
+  const auto [mp4, mp4_frames] = clip_psnr(dir / "default.mp4", frames);
+  const auto [fine, fine_frames] = clip_psnr(dir / "fine.mkv", frames);
+  const auto [avi, avi_frames] = clip_psnr(dir / "mjpeg.avi", frames);
+  EXPECT_EQ(mp4_frames, 30);
+  EXPECT_EQ(fine_frames, 30);
+  EXPECT_EQ(avi_frames, 30);
+  std::printf("worst frame PSNR: default .mp4 %.1f dB, --crf 10 .mkv %.1f dB, .avi %.1f dB\n", mp4, fine, avi);
+  EXPECT_GT(mp4, 30.0);
+  EXPECT_GT(fine, mp4 + 2.0) << "a lower crf keeps more";
+  EXPECT_GT(avi, 30.0);
+  EXPECT_GT(std::filesystem::file_size(dir / "fine.mkv"), std::filesystem::file_size(dir / "default.mp4"));
+
+  // the same frames cut to 319x239, as a shard of their own
+  const auto odd = dir / "odd";
+  std::filesystem::create_directories(odd);
+  for (const auto& e : std::filesystem::directory_iterator(frames)) {
+    if (e.path().extension() != ".png") continue;
+    const cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_COLOR);
+    cv::imwrite((odd / e.path().filename()).string(), img(cv::Rect(0, 0, 319, 239)));
+  }
+  std::ifstream in(frames / "shard.json");
+  nlohmann::json info = nlohmann::json::parse(in);
+  info["width"] = 319;
+  info["height"] = 239;
+  std::ofstream(odd / "shard.json") << info.dump();
+  ASSERT_EQ(join(odd, "odd.mp4", ""), 0);
+  const auto [odd_psnr, odd_frames] = clip_psnr(dir / "odd.mp4", odd, cv::Rect(0, 0, 319, 239));
+  EXPECT_EQ(odd_frames, 30);
+  EXPECT_GT(odd_psnr, 30.0);
   std::filesystem::remove_all(dir);
 }
 
