@@ -957,7 +957,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
 
   // the real depth: the sensor's, cleaned where the fused room or a support plane knows the surface
   auto td = std::chrono::steady_clock::now();
-  const OcclusionOptions& oo = opt.occlusion_options;
+  OcclusionOptions oo = opt.occlusion_options;
+  oo.threads = opt.threads;
   const int margin = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
   thread_local DepthImage cleaned;
   thread_local std::vector<glm::vec3> real_normals;
@@ -995,7 +996,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       cropped.width = area.x1 - area.x0;
       cropped.height = area.y1 - area.y0;
       cropped.depth_m = crop(real_depth->depth_m, w, area);
-      const DepthImage f = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
+      const DepthImage f = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px, oo.threads);
       for (int y = area.y0; y < area.y1; ++y) {
         std::copy_n(&f.depth_m[static_cast<size_t>(y - area.y0) * cropped.width], cropped.width, &filled.depth_m[static_cast<size_t>(y) * w + area.x0]);
       }
@@ -1101,17 +1102,20 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   }
 
   t0 = std::chrono::steady_clock::now();
-  for (int y = y0; y < y1; ++y) {
-    for (int x = x0; x < x1; ++x) {
-      const size_t i = static_cast<size_t>(y) * w + x, l = local(x, y);
-      if (alpha[l] <= 0.0f) continue;
-      for (int c = 0; c < 3; ++c) {
-        const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow_ptr ? (*shadow_ptr)[i][c] : 1.0f);
-        // the virtual colour over the real one by its coverage, then by the occlusion's alpha
-        out.rgb[3 * i + c] = core::linear_to_srgb8(real + alpha[l] * (colour[l][c] - coverage[l] * real));
+  const std::vector<float>& alpha_ = alpha;
+  core::for_each_tile(rw, rh, opt.threads, [&](const core::Tile& t) {  // every pixel on its own
+    for (int y = y0 + t.y0; y < y0 + t.y1; ++y) {
+      for (int x = x0 + t.x0; x < x0 + t.x1; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x, l = local(x, y);
+        if (alpha_[l] <= 0.0f) continue;
+        for (int c = 0; c < 3; ++c) {
+          const float real = core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * (shadow_ptr ? (*shadow_ptr)[i][c] : 1.0f);
+          // the virtual colour over the real one by its coverage, then by the occlusion's alpha
+          out.rgb[3 * i + c] = core::linear_to_srgb8(real + alpha_[l] * (colour_[l][c] - coverage_[l] * real));
+        }
       }
     }
-  }
+  });
   st.composite_ms = ms_since(t0);
   if (stats) *stats = st;
   return out;
