@@ -1,16 +1,13 @@
 #include "artrace/ar/occlusion.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 
-#include "artrace/core/renderer.h"
-
 namespace artrace::ar {
 
-DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px, int threads) {
+DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px) {
   DepthImage cur = depth;
   const int w = depth.width, h = depth.height;
   // Only small holes are filled: a large region without readings (beyond the sensor's range, a
@@ -39,37 +36,32 @@ DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int
       for (const int32_t i : component) fillable[static_cast<size_t>(i)] = 1;
     }
   }
+  std::vector<float> window;
   for (int pass = 0; pass < passes; ++pass) {
     DepthImage next = cur;
-    std::atomic<bool> changed{false};
-    // each pixel of a pass reads the previous pass only: the tiles may go in any order
-    core::for_each_tile(w, h, threads, [&](const core::Tile& t) {
-      std::vector<float> window;
-      bool any = false;
-      for (int y = t.y0; y < t.y1; ++y) {
-        for (int x = t.x0; x < t.x1; ++x) {
-          const size_t i = static_cast<size_t>(y) * w + x;
-          if (cur.depth_m[i] > 0.0f || !fillable[i]) continue;
-          window.clear();
-          for (int dy = -radius; dy <= radius; ++dy) {
-            for (int dx = -radius; dx <= radius; ++dx) {
-              const int xx = x + dx, yy = y + dy;
-              if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-              const float v = cur.at(xx, yy);
-              if (v > 0.0f) window.push_back(v);
-            }
+    bool changed = false;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x;
+        if (cur.depth_m[i] > 0.0f || !fillable[i]) continue;
+        window.clear();
+        for (int dy = -radius; dy <= radius; ++dy) {
+          for (int dx = -radius; dx <= radius; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+            const float v = cur.at(xx, yy);
+            if (v > 0.0f) window.push_back(v);
           }
-          if (window.empty()) continue;
-          // Holes cluster at silhouettes on the background side (the sensor's shadow): lean towards
-          // the far values of the neighbourhood rather than its median.
-          const size_t pick = window.size() * 3 / 4;
-          std::nth_element(window.begin(), window.begin() + pick, window.end());
-          next.depth_m[i] = window[pick];
-          any = true;
         }
+        if (window.empty()) continue;
+        // Holes cluster at silhouettes on the background side (the sensor's shadow): lean towards
+        // the far values of the neighbourhood rather than its median.
+        const size_t pick = window.size() * 3 / 4;
+        std::nth_element(window.begin(), window.begin() + pick, window.end());
+        next.depth_m[i] = window[pick];
+        changed = true;
       }
-      if (any) changed = true;
-    });
+    }
     cur = std::move(next);
     if (!changed) break;
   }
@@ -78,12 +70,11 @@ DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int
 
 std::vector<float> occlusion_alpha(const DepthImage& sensor, const ColorImage& color, const std::vector<float>& zv,
                                    const OcclusionOptions& opt) {
-  return occlusion_alpha_filled(
-      fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes, opt.max_hole_px, opt.threads), color, zv, opt);
+  return occlusion_alpha_filled(fill_depth_holes(sensor, opt.fill_radius, opt.fill_passes, opt.max_hole_px), color, zv, opt);
 }
 
-std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorImage& color,
-                                          const std::vector<float>& zv, const OcclusionOptions& opt) {
+std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorImage& color, const std::vector<float>& zv,
+                                          const OcclusionOptions& opt) {
   const int w = filled.width, h = filled.height;
   std::vector<float> alpha(static_cast<size_t>(w) * h, 0.0f);
   for (size_t i = 0; i < alpha.size(); ++i) {
@@ -110,56 +101,50 @@ std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorI
   std::vector<int32_t> run_start(alpha.size()), run_end(alpha.size());
   for (int y = 0; y < h; ++y) {
     const size_t row = static_cast<size_t>(y) * w;
-    for (int x = 0; x < w; ++x)
-      run_start[row + x] = x > 0 && alpha[row + x] == alpha[row + x - 1] ? run_start[row + x - 1] : x;
-    for (int x = w - 1; x >= 0; --x)
-      run_end[row + x] = x + 1 < w && alpha[row + x] == alpha[row + x + 1] ? run_end[row + x + 1] : x + 1;
+    for (int x = 0; x < w; ++x) run_start[row + x] = x > 0 && alpha[row + x] == alpha[row + x - 1] ? run_start[row + x - 1] : x;
+    for (int x = w - 1; x >= 0; --x) run_end[row + x] = x + 1 < w && alpha[row + x] == alpha[row + x + 1] ? run_end[row + x + 1] : x + 1;
   }
-  // each pixel reads alpha and writes its own out: the tiles may go in any order
-  core::for_each_tile(w, h, opt.threads, [&](const core::Tile& t) {
-    for (int y = t.y0; y < t.y1; ++y) {
-      for (int x = t.x0; x < t.x1; ++x) {
-        const size_t i = static_cast<size_t>(y) * w + x;
-        if (!std::isfinite(zv[i])) continue;
-        const int lo = std::max(0, x - r), hi = std::min(w - 1, x + r);
-        bool uniform = true;
-        for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r) && uniform; ++yy) {
-          const size_t j = static_cast<size_t>(yy) * w + x;
-          uniform = alpha[j] == alpha[i] && run_start[j] <= lo && run_end[j] > hi;
-        }
-        if (uniform) continue;
-        bool mixed = false;
-        for (int dy = -r; dy <= r && !mixed; ++dy) {
-          for (int dx = -r; dx <= r; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-            if (std::fabs(alpha[static_cast<size_t>(yy) * w + xx] - alpha[i]) > 0.01f) {
-              mixed = true;
-              break;
-            }
-          }
-        }
-        if (!mixed) continue;
-        const uint8_t* c0 = color.at(x, y);
-        double sum = 0.0, wsum = 0.0;
-        for (int dy = -r; dy <= r; ++dy) {
-          for (int dx = -r; dx <= r; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
-            const size_t j = static_cast<size_t>(yy) * w + xx;
-            if (!std::isfinite(zv[j])) continue;
-            const uint8_t* c1 = color.at(xx, yy);
-            const double dc = (c0[0] - c1[0]) * (c0[0] - c1[0]) + (c0[1] - c1[1]) * (c0[1] - c1[1]) +
-                              (c0[2] - c1[2]) * (c0[2] - c1[2]);
-            const double wt = std::exp(-dc * inv_c - (dx * dx + dy * dy) * inv_s);
-            sum += wt * alpha[j];
-            wsum += wt;
-          }
-        }
-        if (wsum > 0.0) out[i] = static_cast<float>(sum / wsum);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const size_t i = static_cast<size_t>(y) * w + x;
+      if (!std::isfinite(zv[i])) continue;
+      const int lo = std::max(0, x - r), hi = std::min(w - 1, x + r);
+      bool uniform = true;
+      for (int yy = std::max(0, y - r); yy <= std::min(h - 1, y + r) && uniform; ++yy) {
+        const size_t j = static_cast<size_t>(yy) * w + x;
+        uniform = alpha[j] == alpha[i] && run_start[j] <= lo && run_end[j] > hi;
       }
+      if (uniform) continue;
+      bool mixed = false;
+      for (int dy = -r; dy <= r && !mixed; ++dy) {
+        for (int dx = -r; dx <= r; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          if (std::fabs(alpha[static_cast<size_t>(yy) * w + xx] - alpha[i]) > 0.01f) {
+            mixed = true;
+            break;
+          }
+        }
+      }
+      if (!mixed) continue;
+      const uint8_t* c0 = color.at(x, y);
+      double sum = 0.0, wsum = 0.0;
+      for (int dy = -r; dy <= r; ++dy) {
+        for (int dx = -r; dx <= r; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
+          const size_t j = static_cast<size_t>(yy) * w + xx;
+          if (!std::isfinite(zv[j])) continue;
+          const uint8_t* c1 = color.at(xx, yy);
+          const double dc = (c0[0] - c1[0]) * (c0[0] - c1[0]) + (c0[1] - c1[1]) * (c0[1] - c1[1]) + (c0[2] - c1[2]) * (c0[2] - c1[2]);
+          const double wt = std::exp(-dc * inv_c - (dx * dx + dy * dy) * inv_s);
+          sum += wt * alpha[j];
+          wsum += wt;
+        }
+      }
+      if (wsum > 0.0) out[i] = static_cast<float>(sum / wsum);
     }
-  });
+  }
   return out;
 }
 
@@ -227,8 +212,8 @@ std::vector<uint8_t> covered_pixels(const std::vector<float>& zv) {
   return c;
 }
 
-MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth,
-                     const std::vector<uint8_t>& covered, int w, int h) {
+MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>& truth, const std::vector<uint8_t>& covered,
+                     int w, int h) {
   MaskScore s;
   const std::vector<uint8_t> est = visible(alpha);
   size_t inter = 0, uni = 0;
@@ -254,9 +239,7 @@ MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>
     for (int y = 0; y < h; ++y) {
       for (int x = 0; x < w; ++x) {
         const uint8_t v = m[static_cast<size_t>(y) * w + x];
-        if ((x > 0 && m[static_cast<size_t>(y) * w + x - 1] != v) ||
-            (y > 0 && m[static_cast<size_t>(y - 1) * w + x] != v))
-          b.push_back({x, y});
+        if ((x > 0 && m[static_cast<size_t>(y) * w + x - 1] != v) || (y > 0 && m[static_cast<size_t>(y - 1) * w + x] != v)) b.push_back({x, y});
       }
     }
     return b;
@@ -268,8 +251,8 @@ MaskScore score_mask(const std::vector<float>& alpha, const std::vector<uint8_t>
 
 std::optional<double> occlusion_jitter(const std::vector<float>& previous_alpha, const std::vector<float>& alpha,
                                        const std::vector<uint8_t>& previous_truth, const std::vector<uint8_t>& truth,
-                                       const std::vector<uint8_t>& previous_covered,
-                                       const std::vector<uint8_t>& covered, int w, int h) {
+                                       const std::vector<uint8_t>& previous_covered, const std::vector<uint8_t>& covered,
+                                       int w, int h) {
   const size_t edge = occlusion_boundary(truth, covered, w, h).size();
   if (edge == 0) return std::nullopt;
   size_t unexplained = 0;

@@ -199,8 +199,7 @@ TEST(Occlusion, RefinementMatchesItsDefinitionPixelByPixel) {
     }
     OcclusionOptions plain;
     plain.refine = false;
-    OcclusionOptions o;
-    o.threads = 1 + round % 3;  // the tiles of the parallel refinement meet the definition too
+    const OcclusionOptions o;
     const std::vector<float> a = occlusion_alpha_filled(depth, color, zv, plain);
     const std::vector<float> refined = occlusion_alpha_filled(depth, color, zv, o);
     const int r = o.guide_radius;
@@ -359,49 +358,6 @@ TEST(Occlusion, HolesAtASilhouetteAreFilledFromTheFarSide) {
     EXPECT_EQ(alpha[y * kW + 31], 0.0f) << "the occluder at row " << y;
     EXPECT_EQ(alpha[y * kW + 32], 1.0f) << "the hole next to the occluder, row " << y;
     EXPECT_EQ(alpha[y * kW + 33], 1.0f) << "the hole next to the wall, row " << y;
-  }
-}
-
-/// Hole filling and the refinement run on tiles in parallel; each pixel of a pass reads only the
-/// pass before, so the result is the same, bit for bit, for any thread count and any run. Random
-/// depth steps with holes of every size up to and beyond max_hole_px.
-TEST(Occlusion, SameResultForAnyThreadCount) {
-  constexpr int w = 131, h = 97;  // tiles cut at odd places
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  DepthImage depth;
-  depth.width = w;
-  depth.height = h;
-  depth.depth_m.resize(static_cast<size_t>(w) * h);
-  ColorImage color;
-  color.width = w;
-  color.height = h;
-  color.rgb.resize(3 * depth.depth_m.size());
-  std::vector<float> zv(depth.depth_m.size());
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const size_t i = static_cast<size_t>(y) * w + x;
-      depth.depth_m[i] = (x / 9 + y / 7) % 3 == 0 ? 1.0f + 0.02f * u(rng) : 2.0f + 0.5f * u(rng);
-      for (int c = 0; c < 3; ++c) color.rgb[3 * i + c] = static_cast<uint8_t>(255 * u(rng));
-      zv[i] = u(rng) < 0.1f ? kNone : 1.5f + 0.2f * u(rng);
-    }
-  }
-  for (int k = 0; k < 60; ++k) {  // holes: squares of 1 to 12 pixels a side
-    const int s = 1 + static_cast<int>(12 * u(rng)), x0 = static_cast<int>((w - s) * u(rng)), y0 = static_cast<int>((h - s) * u(rng));
-    for (int y = y0; y < y0 + s; ++y)
-      for (int x = x0; x < x0 + s; ++x) depth.depth_m[static_cast<size_t>(y) * w + x] = 0.0f;
-  }
-  OcclusionOptions o;
-  o.threads = 1;
-  const DepthImage one = fill_depth_holes(depth, o.fill_radius, o.fill_passes, o.max_hole_px, 1);
-  const std::vector<float> alpha_one = occlusion_alpha(depth, color, zv, o);
-  int filled = 0;
-  for (size_t i = 0; i < depth.depth_m.size(); ++i) filled += depth.depth_m[i] == 0.0f && one.depth_m[i] > 0.0f;
-  ASSERT_GT(filled, 100) << "holes were filled";
-  for (const int threads : {2, 3, 2, 0}) {
-    o.threads = threads;
-    EXPECT_TRUE(fill_depth_holes(depth, o.fill_radius, o.fill_passes, o.max_hole_px, threads).depth_m == one.depth_m) << threads << " threads";
-    EXPECT_TRUE(occlusion_alpha(depth, color, zv, o) == alpha_one) << threads << " threads";
   }
 }
 

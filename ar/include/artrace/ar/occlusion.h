@@ -31,12 +31,11 @@ struct OcclusionOptions {
   int guide_radius = 3;
   double guide_sigma_color = 20.0;  ///< in 8-bit colour units
   double guide_sigma_space = 1.5;   ///< in pixels
-  int threads = 1;  ///< workers for the per-pixel passes (0: all cores); the result is the same for any count
 };
 
 /// Fills holes (0) of a depth map from the far side of their valid neighbours; connected holes of
-/// more than `max_hole_px` pixels stay 0. `threads` as in OcclusionOptions.
-DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px, int threads = 1);
+/// more than `max_hole_px` pixels stay 0.
+DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px);
 
 /// Visibility of the virtual surface at each pixel, 0 (hidden by the real scene) .. 1 (in front).
 /// `virtual_depth_m` is the camera-space depth of the virtual surface per pixel (+inf where there
