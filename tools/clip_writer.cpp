@@ -158,6 +158,4 @@ void ClipWriter::finish() {
   if (!(w.format->oformat->flags & AVFMT_NOFILE)) w.check(avio_closep(&w.format->pb), "closing the file");
 }
 
-std::string ClipWriter::encoder() const { return impl_->codec->codec->name; }
-
 }  // namespace artrace::tools

@@ -1,7 +1,8 @@
 // artrace export: composites an AR scene into a recording and writes a clip (video through
 // FFmpeg's libraries, see clip_writer.h: H.264 where available, MPEG-4 otherwise, Motion JPEG in
-// .avi; or numbered PNGs with a shard.json naming the frames, which artrace join puts together). The output appears under its final name only when
-// complete; Ctrl-C stops cleanly and leaves nothing behind.
+// .avi; or numbered PNGs with a shard.json naming the frames, which artrace join puts together).
+// The output appears under its final name only when complete; Ctrl-C stops cleanly and leaves
+// nothing behind.
 #include "bench_util.h"
 #include "commands.h"
 #include "frame_views.h"
