@@ -3,6 +3,7 @@
 // packets sent through avcodec_send_frame / avcodec_receive_packet, and the trailer written last.
 #include "clip_writer.h"
 
+#include <CLI/CLI.hpp>
 #include <opencv2/core.hpp>
 
 #include <stdexcept>
@@ -26,6 +27,15 @@ std::string av_error(int code) {
 
 }  // namespace
 
+void add_clip_options(CLI::App* cmd, ClipOptions& clip) {
+  cmd->add_option("--preset", clip.preset, "x264's speed preset for .mp4/.mkv/.mov")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo"}));
+  cmd->add_option("--crf", clip.crf, "x264's constant rate factor (0 lossless, 51 worst; 18 looks lossless)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 51));
+}
+
 struct ClipWriter::Impl {
   std::string name;
   cv::Size size, coded;  // the frames', and the encoder's (even)
@@ -37,7 +47,7 @@ struct ClipWriter::Impl {
   SwsContext* sws = nullptr;
   cv::Mat padded;
   int64_t next_pts = 0;
-  bool header = false, finished = false;
+  bool finished = false;
 
   void check(int code, const char* what) const {
     if (code < 0) throw std::runtime_error(name + ": " + what + ": " + av_error(code));
@@ -71,10 +81,10 @@ struct ClipWriter::Impl {
 ClipWriter::ClipWriter(const std::filesystem::path& file, const std::string& shown_name, cv::Size size, const ClipOptions& options)
     : impl_(std::make_unique<Impl>()) {
   Impl& w = *impl_;
+  if (size.width <= 0 || size.height <= 0) throw std::runtime_error(shown_name + ": frames of " + std::to_string(size.width) + "x" + std::to_string(size.height));
   w.name = shown_name;
   w.size = size;
   w.coded = cv::Size((size.width + 1) & ~1, (size.height + 1) & ~1);
-  if (size.width <= 0 || size.height <= 0) throw std::runtime_error(shown_name + ": frames of " + std::to_string(size.width) + "x" + std::to_string(size.height));
   if (!(options.fps > 0.0)) throw std::runtime_error(shown_name + ": frame rate " + std::to_string(options.fps));
   av_log_set_level(AV_LOG_ERROR);
   const std::string path = file.string();
@@ -117,7 +127,6 @@ ClipWriter::ClipWriter(const std::filesystem::path& file, const std::string& sho
   w.stream->avg_frame_rate = c.framerate;
   if (!(w.format->oformat->flags & AVFMT_NOFILE)) w.check(avio_open(&w.format->pb, path.c_str(), AVIO_FLAG_WRITE), "cannot create the file");
   w.check(avformat_write_header(w.format, nullptr), "writing the header");
-  w.header = true;
 
   w.frame->format = pixels;
   w.frame->width = c.width;

@@ -12,6 +12,10 @@
 #include <memory>
 #include <string>
 
+namespace CLI {
+class App;
+}
+
 namespace artrace::tools {
 
 struct ClipOptions {
@@ -21,6 +25,9 @@ struct ClipOptions {
   /// x264's constant rate factor (0 lossless ... 51; 23 is x264's default)
   int crf = 23;
 };
+
+/// --preset and --crf on a command that writes clips (the frame rate is each command's own).
+void add_clip_options(CLI::App* cmd, ClipOptions& clip);
 
 /// Writes BGR frames (8-bit, 3 channels, all of one size) to `file`, the container chosen by its
 /// extension: H.264 (libx264) in .mp4, .mkv and .mov, MPEG-4 part 2 where FFmpeg has no x264, and

@@ -7,6 +7,7 @@
 #include "commands.h"
 #include "frame_views.h"
 #include "ar_session.h"
+#include "clip_writer.h"
 #include "shards.h"
 
 #include "artrace/ar/compositor.h"
@@ -32,9 +33,8 @@ struct Options {
   std::string recording, output, frames;
   ArArgs ar;
   int first = 0, last = -1;
-  double fps = 30.0;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
-  ClipOptions clip;
+  ClipOptions clip;  ///< and the frame rate a shard records
 };
 
 void run(const Options& opt) {
@@ -99,11 +99,7 @@ void run(const Options& opt) {
       frame_ms.push_back(ms_since(t0));
       const auto tw = std::chrono::steady_clock::now();
       if (video) {
-        if (!writer) {
-          ClipOptions clip = opt.clip;
-          clip.fps = opt.fps;
-          writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
-        }
+        if (!writer) writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), opt.clip);
         writer->write(img);
       } else {
         if (!cv::imwrite(frame_png(partial, first + k).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
@@ -128,7 +124,7 @@ void run(const Options& opt) {
   if (!video) {
     // a folder of frames is a shard: it says which frames of which recording it holds, for join
     try {
-      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.fps});
+      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.clip.fps});
     } catch (...) {
       cleanup();
       throw;
@@ -155,14 +151,14 @@ void add_export_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand("export", "Composite an AR scene into a recording and write a clip");
   cmd->add_option("recording", opt->recording, "TUM folder, image folder or .oni file")->required();
   add_ar_options(cmd, opt->ar);
-  cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder for numbered PNGs")->required();
+  cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .mkv, .mov, .avi), or a folder for numbered PNGs")->required();
   cmd->add_option("--frames", opt->frames,
                   "frames A:B (A to B-1; A: to the end): a shard, the same frames as a whole export gives; into a folder, "
                   "for artrace join");
   cmd->add_option("--first", opt->first, "first frame")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
-  cmd->add_option("--fps", opt->fps, "frame rate of a video clip")->capture_default_str()->check(finite_range(1.0, 1000.0));
+  cmd->add_option("--fps", opt->clip.fps, "frame rate of a video clip")->capture_default_str()->check(finite_range(1.0, 1000.0));
   add_clip_options(cmd, opt->clip);
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");

@@ -2,6 +2,7 @@
 // one clip, encoded in one go, or one folder of frames. It refuses, naming the frames, when the
 // shards leave a gap or overlap, and writes nothing under the final name until it is complete.
 #include "bench_util.h"
+#include "clip_writer.h"
 #include "commands.h"
 #include "shards.h"
 
@@ -61,6 +62,8 @@ void run_join(const JoinOptions& opt) {
   const std::filesystem::path partial = prepare_partial(out);
   std::unique_ptr<ClipWriter> writer;
   const double fps = opt.fps > 0.0 ? opt.fps : a.fps;
+  ClipOptions clip = opt.clip;
+  clip.fps = fps;
   g_join_interrupted = false;
   auto previous = std::signal(SIGINT, on_join_sigint);
   const auto start = std::chrono::steady_clock::now();
@@ -75,11 +78,7 @@ void run_join(const JoinOptions& opt) {
           throw std::runtime_error(src.string() + ": " + std::to_string(img.cols) + "x" + std::to_string(img.rows) +
                                    ", the shard says " + std::to_string(a.width) + "x" + std::to_string(a.height));
         }
-        if (!writer) {
-          ClipOptions clip = opt.clip;
-          clip.fps = fps;
-          writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
-        }
+        if (!writer) writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
         writer->write(img);
       } else {
         // the frames as they are (a link where the filesystem allows it, else a copy)
@@ -117,7 +116,7 @@ void add_join_command(CLI::App& app) {
   auto opt = std::make_shared<JoinOptions>();
   CLI::App* cmd = app.add_subcommand("join", "Join the shards of an export (folders from export --frames) into one clip or folder");
   cmd->add_option("shards", opt->shards, "shard folders, in any order")->required();
-  cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .avi), or a folder of numbered PNGs")->required();
+  cmd->add_option("-o,--output", opt->output, "clip.mp4 (or .mkv, .mov, .avi), or a folder of numbered PNGs")->required();
   cmd->add_option("--frames", opt->frames, "the frames the shards must cover, A:B (default: the whole recording)");
   cmd->add_option("--fps", opt->fps, "frame rate of a video clip (default: the shards')")->check(finite_range(1.0, 1000.0));
   add_clip_options(cmd, opt->clip);

@@ -113,15 +113,6 @@ std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_
   return out;
 }
 
-void add_clip_options(CLI::App* cmd, ClipOptions& clip) {
-  cmd->add_option("--preset", clip.preset, "x264's speed preset for .mp4/.mkv/.mov: ultrafast, superfast, veryfast, faster, fast, medium, slow, slower, veryslow")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo"}));
-  cmd->add_option("--crf", clip.crf, "x264's constant rate factor (0 lossless, 51 worst; 18 looks lossless)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 51));
-}
-
 bool is_video_path(const std::filesystem::path& p) {
   const std::string ext = p.extension().string();
   return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";

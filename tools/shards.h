@@ -3,9 +3,6 @@
 // of shards covers a range exactly once and encodes it in one go.
 #pragma once
 
-#include "clip_writer.h"
-
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -51,8 +48,6 @@ ShardInfo read_shard_info(const std::filesystem::path& folder);
 /// missing", "frames 20-29 are in both a/ and b/"); empty when they tile it.
 std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end);
 
-/// The options of a video clip's encoder (--preset, --crf) on a command that writes clips.
-void add_clip_options(CLI::App* cmd, ClipOptions& clip);
 /// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov).
 bool is_video_path(const std::filesystem::path& p);
 /// Where an output is written before it is complete: "clip.partial.mp4" beside a clip (the

@@ -1101,7 +1101,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   }
 
   t0 = std::chrono::steady_clock::now();
-  const std::vector<float>& alpha_ = alpha;
+  const std::vector<float>& alpha_ = alpha;  // the workers' thread_local name would be their own
   core::for_each_tile(rw, rh, opt.threads, [&](const core::Tile& t) {  // every pixel on its own
     for (int y = y0 + t.y0; y < y0 + t.y1; ++y) {
       for (int x = x0 + t.x0; x < x0 + t.x1; ++x) {
