@@ -400,59 +400,96 @@ int to_pixel(float x, int n) {
   return x < static_cast<float>(n) ? static_cast<int>(x) : n;
 }
 
-/// The 16 screen points a box's shadow volume from a light projects to: each corner of the box,
-/// and the corner pushed away from the light to infinity (its vanishing point). False when one
-/// lies behind the camera, or the light sits on a corner: the volume can then reach anywhere.
-bool volume_points(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, glm::vec2 (&uv)[16]) {
+/// Nearer to the camera's plane than this (metres along its axis) nothing is traced or shadowed.
+constexpr double kNear = 1e-3;
+
+/// Screen points whose convex hull holds what of a box lies at least kNear in front of the camera
+/// and, given a light, of the box's shadow volume from it (the box pushed away from the light to
+/// infinity): the corners in front, where segments between corners and rays from corners along the
+/// directions away from the light cross z = kNear, and the vanishing points of those directions.
+/// None when nothing is in front. False when the part in front has no bounds on screen (a direction
+/// away from the light parallel to the image plane, or some pointing ahead and others back), or
+/// the light sits on a corner: the volume can then reach anywhere.
+bool screen_points(const core::Camera& cam, const core::Aabb& b, const VirtualLight* l, std::vector<glm::dvec2>& out) {
+  out.clear();
   const glm::mat3 to_cam = glm::transpose(cam.rotation);
-  // a point, or a direction (its vanishing point), in camera space; false behind the camera
-  auto project = [&](const glm::vec3& c, glm::vec2& out) {
-    if (c.z <= 1e-4f) return false;
-    out = glm::vec2(cam.fx * c.x / c.z + cam.cx, cam.fy * c.y / c.z + cam.cy);
-    return true;
+  // corners in front and vanishing points projected in float, crossings (far off the image, as a
+  // rule) in double
+  auto project = [&](const glm::vec3& c) { out.emplace_back(cam.fx * c.x / c.z + cam.cx, cam.fy * c.y / c.z + cam.cy); };
+  auto project_d = [&](const glm::dvec3& c) {
+    out.emplace_back(static_cast<double>(cam.fx) * c.x / c.z + cam.cx, static_cast<double>(cam.fy) * c.y / c.z + cam.cy);
   };
+  glm::vec3 corner[8], away[8];
+  int ahead = 0;
   for (int c = 0; c < 8; ++c) {
     const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-    const glm::vec3 away = p - l.position;
-    if (glm::dot(away, away) == 0.0f) return false;
-    if (!project(to_cam * (p - cam.position), uv[2 * c]) || !project(to_cam * away, uv[2 * c + 1])) return false;
+    corner[c] = to_cam * (p - cam.position);
+    if (!l) continue;
+    const glm::vec3 a = p - l->position;
+    if (glm::dot(a, a) == 0.0f) return false;
+    away[c] = to_cam * a;
+    if (away[c].z == 0.0f) return false;
+    ahead += away[c].z > 0.0f;
+  }
+  if (l && ahead != 0 && ahead != 8) return false;
+  // where p + s d crosses z = kNear: s in [0, 1] for a segment (d = q - p), s >= 0 for a ray
+  auto crossing = [&](const glm::vec3& pf, const glm::vec3& df, bool ray) {
+    const glm::dvec3 p(pf), d(df);
+    if (d.z == 0.0) return;
+    const double s = (kNear - p.z) / d.z;
+    if (s >= 0.0 && (ray || s <= 1.0)) project_d(p + s * d);
+  };
+  for (int c = 0; c < 8; ++c) {
+    if (corner[c].z >= kNear) project(corner[c]);
+    for (int e = c + 1; e < 8; ++e) crossing(corner[c], corner[e] - corner[c], false);
+    if (!l) continue;
+    for (int d = 0; d < 8; ++d) crossing(corner[c], away[d], true);
+    if (ahead == 8) project(away[c]);  // the vanishing point
   }
   return true;
 }
 
-/// The pixel rectangle around projected points spanning [minx, maxx] x [miny, maxy], 2 px wider
-/// on each side; empty when there are none (minx > maxx).
-Rect rect_around(float minx, float miny, float maxx, float maxy, int w, int h) {
-  if (!(minx <= maxx)) return Rect{0, 0, 0, 0};
-  return Rect{to_pixel(std::floor(minx) - 2.0f, w), to_pixel(std::floor(miny) - 2.0f, h), to_pixel(std::ceil(maxx) + 2.0f, w),
-              to_pixel(std::ceil(maxy) + 2.0f, h)};
-}
+/// The extent of screen points.
+struct Extent {
+  double minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+  void add(const std::vector<glm::dvec2>& pts) {
+    for (const glm::dvec2& q : pts) {
+      minx = std::min(minx, q.x);
+      maxx = std::max(maxx, q.x);
+      miny = std::min(miny, q.y);
+      maxy = std::max(maxy, q.y);
+    }
+  }
+  /// The pixels around it, `grow` pixels wider on each side (bounds rounded to floats first); empty
+  /// when it holds no point.
+  Rect pixels(float grow, int w, int h) const {
+    const float x0 = static_cast<float>(minx), y0 = static_cast<float>(miny), x1 = static_cast<float>(maxx), y1 = static_cast<float>(maxy);
+    if (!(x0 <= x1)) return Rect{0, 0, 0, 0};
+    return Rect{to_pixel(std::floor(x0) - grow, w), to_pixel(std::floor(y0) - grow, h), to_pixel(std::ceil(x1) + grow, w),
+                to_pixel(std::ceil(y1) + grow, h)};
+  }
+};
 
 /// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
-/// shadow volume (volume_points). The whole image when a volume reaches behind the camera.
+/// shadow volume in front of the camera (screen_points). The whole image where one has none.
 Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
                  int w, int h) {
-  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
+  Extent e;
+  std::vector<glm::dvec2> pts;
   for (const core::Aabb& b : boxes) {
     if (b.empty()) continue;
     for (const VirtualLight& l : lights) {
-      glm::vec2 uv[16];
-      if (!volume_points(cam, b, l, uv)) return Rect{0, 0, w, h};
-      for (const glm::vec2& q : uv) {
-        minx = std::min(minx, q.x);
-        maxx = std::max(maxx, q.x);
-        miny = std::min(miny, q.y);
-        maxy = std::max(maxy, q.y);
-      }
+      if (!screen_points(cam, b, &l, pts)) return Rect{0, 0, w, h};
+      e.add(pts);
     }
   }
-  return rect_around(minx, miny, maxx, maxy, w, h);
+  return e.pixels(2.0f, w, h);
 }
 
 /// The pixels whose real points can lie in one box's shadow volume from one light, row by row: the
-/// volume projects into the convex hull of its volume_points, whose rows are narrower than its
+/// volume projects into the convex hull of its screen_points, whose rows are narrower than its
 /// rectangle (shadow_rect). Each row's span is the hull's extent over the rows within 2 px,
-/// widened by 2 px, as the rectangle is; the whole image where the volume reaches behind the camera.
+/// widened by 2 px, as the rectangle is; the whole image where the volume has no bounds on screen.
 struct VolumeSpans {
   Rect rect;
   std::vector<int> x0, x1;  ///< per row of rect: columns [x0, x1)
@@ -465,27 +502,20 @@ struct VolumeSpans {
 
 VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, int w, int h) {
   VolumeSpans s;
-  glm::vec2 uv[16];
+  std::vector<glm::dvec2> pts;
   if (b.empty()) {
     s.rect = Rect{0, 0, 0, 0};
     return s;
   }
-  if (!volume_points(cam, b, l, uv)) {
+  if (!screen_points(cam, b, &l, pts)) {
     s.rect = Rect{0, 0, w, h};
     s.x0.assign(static_cast<size_t>(h), 0);
     s.x1.assign(static_cast<size_t>(h), w);
     return s;
   }
-  std::vector<glm::dvec2> pts;
-  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-  for (const glm::vec2& q : uv) {
-    minx = std::min(minx, q.x);
-    maxx = std::max(maxx, q.x);
-    miny = std::min(miny, q.y);
-    maxy = std::max(maxy, q.y);
-    pts.emplace_back(q);
-  }
-  s.rect = rect_around(minx, miny, maxx, maxy, w, h);
+  Extent e;
+  e.add(pts);
+  s.rect = e.pixels(2.0f, w, h);
   if (s.rect.empty()) {
     s.rect = Rect{0, 0, 0, 0};  // no rows either (it can be empty in width only): contains nothing
     return s;
@@ -923,37 +953,23 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const Shader shader{frame, scene, material, opt, lights, opt.real_reflections ? real : nullptr, cam,
                       static_cast<float>(1.0 / std::max(1e-6, frame.color_intrinsics.fx))};
 
-  // Screen rectangle of the virtual objects' bounds: only those tiles are traced.
-  int x0 = 0, y0 = 0, x1 = w, y1 = h;
+  // Screen rectangle of the virtual objects' bounds (what of them lies in front of the camera), 1 px
+  // wider on each side: only those tiles are traced.
   const core::Aabb b = scene.bounds();
   if (b.empty()) {
     if (stats) *stats = st;
     return out;
   }
-  bool behind = false;
-  float minx = INFINITY, miny = INFINITY, maxx = -INFINITY, maxy = -INFINITY;
-  for (int c = 0; c < 8; ++c) {
-    const glm::vec3 p((c & 1) ? b.hi.x : b.lo.x, (c & 2) ? b.hi.y : b.lo.y, (c & 4) ? b.hi.z : b.lo.z);
-    const glm::vec3 q = glm::transpose(cam.rotation) * (p - cam.position);
-    if (q.z <= 1e-3f) {
-      behind = true;
-      break;
-    }
-    const float u = cam.fx * q.x / q.z + cam.cx, v = cam.fy * q.y / q.z + cam.cy;
-    minx = std::min(minx, u);
-    maxx = std::max(maxx, u);
-    miny = std::min(miny, v);
-    maxy = std::max(maxy, v);
-  }
-  if (!behind) {
-    x0 = to_pixel(std::floor(minx) - 1.0f, w);
-    x1 = to_pixel(std::ceil(maxx) + 1.0f, w);
-    y0 = to_pixel(std::floor(miny) - 1.0f, h);
-    y1 = to_pixel(std::ceil(maxy) + 1.0f, h);
-  }
+  std::vector<glm::dvec2> pts;
+  screen_points(cam, b, nullptr, pts);
+  Extent extent;
+  extent.add(pts);
+  const Rect objects = extent.pixels(1.0f, w, h);
+  const int x0 = objects.x0, y0 = objects.y0, x1 = objects.x1, y1 = objects.y1;
   const bool real_shadows = opt.shadows && opt.real_shadows && have_depth;
   const std::vector<core::Aabb> boxes = opt.object_bounds.empty() ? std::vector<core::Aabb>{b} : opt.object_bounds;
   const Rect shadow_area = real_shadows ? shadow_rect(cam, boxes, lights, w, h) : Rect{0, 0, 0, 0};
+  st.shadow_area_pixels = shadow_area.empty() ? 0 : (shadow_area.x1 - shadow_area.x0) * (shadow_area.y1 - shadow_area.y0);
 
   // the real depth: the sensor's, cleaned where the fused room or a support plane knows the surface
   auto td = std::chrono::steady_clock::now();

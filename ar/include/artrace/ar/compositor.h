@@ -113,6 +113,7 @@ struct CompositeOptions {
 
 struct CompositeStats {
   int traced_pixels = 0;
+  int shadow_area_pixels = 0;    ///< pixels whose real points may lie in a virtual shadow (its rectangle)
   int shadow_rays_real = 0;     ///< shadow rays from real points that met the virtual bounds
   int shadowed_real_pixels = 0;  ///< real pixels darkened by a virtual object
   double trace_ms = 0.0, occlusion_ms = 0.0, composite_ms = 0.0;
