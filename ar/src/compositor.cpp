@@ -470,25 +470,9 @@ struct Extent {
   }
 };
 
-/// Pixels whose real points can lie in a virtual object's shadow: the screen bounds of each box's
-/// shadow volume in front of the camera (screen_points). The whole image where one has none.
-Rect shadow_rect(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
-                 int w, int h) {
-  Extent e;
-  std::vector<glm::dvec2> pts;
-  for (const core::Aabb& b : boxes) {
-    if (b.empty()) continue;
-    for (const VirtualLight& l : lights) {
-      if (!screen_points(cam, b, &l, pts)) return Rect{0, 0, w, h};
-      e.add(pts);
-    }
-  }
-  return e.pixels(2.0f, w, h);
-}
-
 /// The pixels whose real points can lie in one box's shadow volume from one light, row by row: the
 /// volume projects into the convex hull of its screen_points, whose rows are narrower than its
-/// rectangle (shadow_rect). Each row's span is the hull's extent over the rows within 2 px,
+/// rectangle. Each row's span is the hull's extent over the rows within 2 px,
 /// widened by 2 px, as the rectangle is; the whole image where the volume has no bounds on screen.
 struct VolumeSpans {
   Rect rect;
@@ -575,14 +559,68 @@ VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const Vir
   return s;
 }
 
+/// Each box's shadow volume from each light, box-major (volume bi * lights + li).
+std::vector<VolumeSpans> shadow_volumes(const core::Camera& cam, const std::vector<core::Aabb>& boxes, const std::vector<VirtualLight>& lights,
+                                        int w, int h) {
+  std::vector<VolumeSpans> v;
+  for (const core::Aabb& b : boxes)
+    for (const VirtualLight& l : lights) v.push_back(shadow_spans(cam, b, l, w, h));
+  return v;
+}
+
+/// The pixels within `margin` (in x and in y) of a rectangle or of the volumes' spans, as one span
+/// per row (the rows' spans' extent) over their bounding rectangle, clipped to the image.
+VolumeSpans pixels_near(const Rect& r, const std::vector<VolumeSpans>& volumes, int margin, int w, int h) {
+  VolumeSpans s;
+  std::vector<int> lo(static_cast<size_t>(h), w), hi(static_cast<size_t>(h), 0);
+  auto add = [&](int y, int x0, int x1) {  // row y's columns [x0, x1), widened by the margin
+    if (x0 >= x1) return;
+    for (int yy = std::max(0, y - margin); yy < std::min(h, y + margin + 1); ++yy) {
+      lo[static_cast<size_t>(yy)] = std::min(lo[static_cast<size_t>(yy)], std::max(0, x0 - margin));
+      hi[static_cast<size_t>(yy)] = std::max(hi[static_cast<size_t>(yy)], std::min(w, x1 + margin));
+    }
+  };
+  if (!r.empty()) {
+    add(r.y0, r.x0, r.x1);
+    for (int y = r.y0 + 1; y < r.y1; ++y) {  // the margin's rows are the first and last row's
+      lo[static_cast<size_t>(y)] = std::min(lo[static_cast<size_t>(y)], std::max(0, r.x0 - margin));
+      hi[static_cast<size_t>(y)] = std::max(hi[static_cast<size_t>(y)], std::min(w, r.x1 + margin));
+    }
+    add(r.y1 - 1, r.x0, r.x1);
+  }
+  for (const VolumeSpans& v : volumes) {
+    for (int y = v.rect.y0; y < v.rect.y1; ++y) add(y, v.x0[static_cast<size_t>(y - v.rect.y0)], v.x1[static_cast<size_t>(y - v.rect.y0)]);
+  }
+  int y0 = 0, y1 = h;
+  while (y0 < h && lo[static_cast<size_t>(y0)] >= hi[static_cast<size_t>(y0)]) ++y0;
+  while (y1 > y0 && lo[static_cast<size_t>(y1 - 1)] >= hi[static_cast<size_t>(y1 - 1)]) --y1;
+  s.rect = Rect{w, y0, 0, y1};
+  for (int y = y0; y < y1; ++y) {
+    s.x0.push_back(lo[static_cast<size_t>(y)]);
+    s.x1.push_back(hi[static_cast<size_t>(y)]);
+    s.rect.x0 = std::min(s.rect.x0, lo[static_cast<size_t>(y)]);
+    s.rect.x1 = std::max(s.rect.x1, hi[static_cast<size_t>(y)]);
+  }
+  if (y0 >= y1) s.rect = Rect{0, 0, 0, 0};
+  return s;
+}
+
+/// How far a model's depth zc and the sensor's may differ and still be one surface: 3 sigma of Nguyen
+/// et al.'s noise model plus the disparity step, 0.4 % of z^2 a metre.
+double agreement(double zc) { return 3.0 * kinect_sigma_m(zc) + 0.004 * zc * zc; }
+/// Up to this depth (metres) a model depth zc agreeing with the sensor's zs lies within
+/// [zs - agreement(zs), zs + agreement(zs + 2 agreement(zs))] (beyond ~25 m it need not).
+constexpr float kMaxAgreementDepth = 15.0f;
+
 /// Where the fused room or a support plane knows the real surface better than this frame's sensor:
 /// a pixel of `region` whose sensor depth lies within the noise of the model's depth along its ray
-/// (3 sigma of Nguyen et al.'s model plus the disparity step, 0.4 % of z^2 a metre) takes the
-/// model's depth and normal; one without a reading takes the room's, or inside the objects' screen
-/// rectangle a plane's (planes have no edges, so they fill holes only near the objects); anything
-/// the sensor sees clearly off the model (a person, a moved chair) keeps the sensor's depth.
-void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const CompositeOptions& opt, const Rect& objects, const Rect& region,
-                      DepthImage& depth, std::vector<glm::vec3>& normals) {
+/// (agreement) takes the model's depth and normal (the room's nearest surface that agrees: one in
+/// front of what the sensor sees, a chair since moved away, does not count); one without a reading
+/// takes the room's, or inside the objects' screen rectangle a plane's (planes have no edges, so
+/// they fill holes only near the objects); anything the sensor sees clearly off the model (a
+/// person, a moved chair) keeps the sensor's depth.
+void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const CompositeOptions& opt, const Rect& objects,
+                      const VolumeSpans& region, DepthImage& depth, std::vector<glm::vec3>& normals) {
   const int w = depth.width;
   const Eigen::Isometry3d pose = frame.world_from_camera.value_or(Eigen::Isometry3d::Identity());
   // the planes in camera space: n . X = d
@@ -597,30 +635,31 @@ void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const C
     planes.push_back({glm::vec3(n.x(), n.y(), n.z()), glm::vec3(p.normal.x(), p.normal.y(), p.normal.z()), static_cast<float>(n.dot(q))});
   }
   const PinholeIntrinsics& k = frame.color_intrinsics;
-  core::for_each_tile(region.x1 - region.x0, region.y1 - region.y0, opt.threads, [&](const core::Tile& tile) {
+  const Rect& rect = region.rect;
+  core::for_each_tile(rect.x1 - rect.x0, rect.y1 - rect.y0, opt.threads, [&](const core::Tile& tile) {
     core::RayPacket rays;
     core::HitPacket hits;
     for (int y = tile.y0; y < tile.y1; y += core::kPacketRows) {
       for (int x = tile.x0; x < tile.x1; x += 4) {
         core::LaneMask mask = 0;
         for (int i = 0; i < core::kPacketSize; ++i) {
-          const int px = region.x0 + x + i % 4, py = region.y0 + y + i / 4;
+          const int px = rect.x0 + x + i % 4, py = rect.y0 + y + i / 4;
           rays.set(i, cam.ray(px + 0.5f, py + 0.5f));  // direction of camera-space z 1: t is the depth
-          if (x + i % 4 < tile.x1 && y + i / 4 < tile.y1) mask |= 1u << i;
+          if (x + i % 4 < tile.x1 && y + i / 4 < tile.y1 && region.contains(px, py)) mask |= 1u << i;
           hits.prim[i] = core::kInvalidId;
         }
+        if (!mask) continue;
         // whether the sensor's depth at a lane agrees with a model's depth zc there
         auto agrees = [&](int i, float zc) {
-          const float zs = depth.depth_m[static_cast<size_t>(region.y0 + y + i / 4) * w + region.x0 + x + i % 4];
+          const float zs = depth.depth_m[static_cast<size_t>(rect.y0 + y + i / 4) * w + rect.x0 + x + i % 4];
           if (!(zs > 0.0f)) return true;
-          const double tol = 3.0 * kinect_sigma_m(zc) + 0.004 * zc * zc;
-          return std::fabs(zs - zc) <= tol;
+          return std::fabs(zs - zc) <= agreement(zc);
         };
         // a support plane first: fitted over many readings, it is the most precise
         core::LaneMask open = mask;
         for (int i = 0; i < core::kPacketSize && !planes.empty(); ++i) {
           if (!((mask >> i) & 1u)) continue;
-          const int px = region.x0 + x + i % 4, py = region.y0 + y + i / 4;
+          const int px = rect.x0 + x + i % 4, py = rect.y0 + y + i / 4;
           const size_t idx = static_cast<size_t>(py) * w + px;
           const float zs = depth.depth_m[idx];
           const bool inside = px >= objects.x0 && px < objects.x1 && py >= objects.y0 && py < objects.y1;
@@ -636,12 +675,22 @@ void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const C
             break;
           }
         }
-        // then the room, cast only for the lanes no plane took
+        // then the room, cast only for the lanes no plane took, and only along the stretch of each
+        // ray where the room's depth would agree with the sensor's reading (all of it where there is
+        // none): the kd-tree skips what lies in front and behind
         if (!open || !opt.room || opt.room->empty()) continue;
+        for (int i = 0; i < core::kPacketSize; ++i) {
+          if (!((open >> i) & 1u)) continue;
+          const float zs = depth.depth_m[static_cast<size_t>(rect.y0 + y + i / 4) * w + rect.x0 + x + i % 4];
+          if (!(zs > 0.0f) || zs > kMaxAgreementDepth) continue;
+          const double below = agreement(zs), above = agreement(zs + 2.0 * below);  // agreement grows with depth
+          rays.tmin[i] = static_cast<float>(std::max(0.0, zs - 1.01 * below));
+          rays.tmax[i] = static_cast<float>(zs + 1.01 * above);
+        }
         opt.room->scene().intersect(rays, open, hits);
         for (int i = 0; i < core::kPacketSize; ++i) {
           if (!((open >> i) & 1u) || hits.prim[i] == core::kInvalidId) continue;
-          const int px = region.x0 + x + i % 4, py = region.y0 + y + i / 4;
+          const int px = rect.x0 + x + i % 4, py = rect.y0 + y + i / 4;
           const size_t idx = static_cast<size_t>(py) * w + px;
           // the room where the sensor saw the same surface, or nothing (taking the room's depth also
           // where the sensor reads beyond it measured worse: IoU 0.979 against 0.983, bench-occlusion)
@@ -661,8 +710,9 @@ void clean_real_depth(const SensorFrame& frame, const core::Camera& cam, const C
 /// map and as noisy as the sensor, so it is not asked about the point's own surface.
 constexpr float kRealSkip = 0.1f;
 const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, const DepthImage& filled,
-                                                  const std::vector<glm::vec3>& real_normals, const Rect& rect, const Shader& shader,
-                                                  const RealScene* proxy, CompositeStats& st, const std::vector<uint32_t>*& darkened_pixels) {
+                                                  const std::vector<glm::vec3>& real_normals, const Rect& rect,
+                                                  const std::vector<VolumeSpans>& volume, const Shader& shader, const RealScene* proxy,
+                                                  CompositeStats& st, const std::vector<uint32_t>*& darkened_pixels) {
   const core::TwoLevelScene& scene = shader.scene;
   const std::vector<VirtualLight>& lights = shader.lights;
   const CompositeOptions& opt = shader.opt;
@@ -686,12 +736,8 @@ const std::vector<glm::vec3>& real_shadow_factors(const SensorFrame& frame, cons
   // the depth with its small holes filled (composite() did, over the rectangle and a margin), so a
   // noisy depth map does not leave unshadowed specks
   auto depth = [&](int x, int y) { return filled.at(x, y); };
-  // each box's shadow volume from each light has a screen rectangle of its own, much smaller than
-  // their union: a point is tested against a box only inside that box's rectangle
-  const core::Camera& cam = shader.cam;
-  std::vector<VolumeSpans> volume(boxes.size() * lights.size());
-  for (size_t bi = 0; bi < boxes.size(); ++bi)
-    for (size_t li = 0; li < lights.size(); ++li) volume[bi * lights.size() + li] = shadow_spans(cam, boxes[bi], lights[li], w, h);
+  // each box's shadow volume from each light (`volume`, box-major) has screen spans of its own,
+  // much smaller than their union: a point is tested against a box only inside that box's spans
   // whether the segment from p to light li (p + to) meets a box; (x, y) is p's pixel
   auto meets_virtual = [&](int x, int y, size_t li, const glm::vec3& p, const glm::vec3& to) {
     const glm::vec3 inv = 1.0f / to;
@@ -909,7 +955,7 @@ DepthImage clean_depth(const SensorFrame& frame, const CompositeOptions& options
   const Rect r{std::max(0, x0), std::max(0, y0), std::min(out.width, x1), std::min(out.height, y1)};
   if (!r.empty() && (options.room || !options.support_planes.empty())) {
     const core::Camera cam = make_camera(frame.color_intrinsics, frame.world_from_camera.value_or(Eigen::Isometry3d::Identity()));
-    clean_real_depth(frame, cam, options, r, r, out, n);
+    clean_real_depth(frame, cam, options, r, pixels_near(r, {}, 0, out.width, out.height), out, n);
   }
   if (normals) *normals = std::move(n);
   return out;
@@ -968,7 +1014,16 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const int x0 = objects.x0, y0 = objects.y0, x1 = objects.x1, y1 = objects.y1;
   const bool real_shadows = opt.shadows && opt.real_shadows && have_depth;
   const std::vector<core::Aabb> boxes = opt.object_bounds.empty() ? std::vector<core::Aabb>{b} : opt.object_bounds;
-  const Rect shadow_area = real_shadows ? shadow_rect(cam, boxes, lights, w, h) : Rect{0, 0, 0, 0};
+  // the pixels whose real points can lie in a virtual object's shadow: each box's shadow volume
+  // from each light, row by row, and their bounding rectangle
+  const std::vector<VolumeSpans> volumes = real_shadows ? shadow_volumes(cam, boxes, lights, w, h) : std::vector<VolumeSpans>{};
+  Rect shadow_area{0, 0, 0, 0};
+  for (const VolumeSpans& v : volumes) {
+    if (v.rect.empty()) continue;
+    shadow_area = shadow_area.empty() ? v.rect
+                                      : Rect{std::min(shadow_area.x0, v.rect.x0), std::min(shadow_area.y0, v.rect.y0),
+                                             std::max(shadow_area.x1, v.rect.x1), std::max(shadow_area.y1, v.rect.y1)};
+  }
   st.shadow_area_pixels = shadow_area.empty() ? 0 : (shadow_area.x1 - shadow_area.x0) * (shadow_area.y1 - shadow_area.y0);
 
   // the real depth: the sensor's, cleaned where the fused room or a support plane knows the surface
@@ -980,16 +1035,12 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const DepthImage* real_depth = &frame.depth;
   real_normals.clear();
   if (have_depth && (opt.room || !opt.support_planes.empty())) {
-    Rect region{x0, y0, x1, y1};
-    if (!shadow_area.empty()) {
-      region = region.empty() ? shadow_area
-                              : Rect{std::min(region.x0, shadow_area.x0), std::min(region.y0, shadow_area.y0), std::max(region.x1, shadow_area.x1),
-                                     std::max(region.y1, shadow_area.y1)};
-    }
-    region = Rect{std::max(0, region.x0 - margin), std::max(0, region.y0 - margin), std::min(w, region.x1 + margin), std::min(h, region.y1 + margin)};
+    // the pixels the occlusion and the shadows look at, and around them the margin the hole
+    // filling reads
+    const VolumeSpans region = pixels_near(Rect{x0, y0, x1, y1}, volumes, margin, w, h);
     cleaned = frame.depth;
     real_normals.assign(static_cast<size_t>(w) * h, glm::vec3(0.0f));
-    if (!region.empty()) clean_real_depth(frame, cam, opt, Rect{x0, y0, x1, y1}, region, cleaned, real_normals);
+    if (!region.rect.empty()) clean_real_depth(frame, cam, opt, Rect{x0, y0, x1, y1}, region, cleaned, real_normals);
     real_depth = &cleaned;
   }
   st.real_depth_ms = ms_since(td);
@@ -1023,7 +1074,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   if (real_shadows) {
     const auto ts = std::chrono::steady_clock::now();
     const std::vector<uint32_t>* darkened = nullptr;
-    shadow_ptr = &real_shadow_factors(frame, filled, real_normals, shadow_area, shader, real, st, darkened);
+    shadow_ptr = &real_shadow_factors(frame, filled, real_normals, shadow_area, volumes, shader, real, st, darkened);
     const std::vector<glm::vec3>& shadow = *shadow_ptr;
     for (const uint32_t i : *darkened) {
       for (int c = 0; c < 3; ++c) out.rgb[3 * i + c] = core::linear_to_srgb8(core::srgb8_to_linear(frame.color.rgb[3 * i + c]) * shadow[i][c]);
