@@ -470,10 +470,8 @@ struct Extent {
   }
 };
 
-/// The pixels whose real points can lie in one box's shadow volume from one light, row by row: the
-/// volume projects into the convex hull of its screen_points, whose rows are narrower than its
-/// rectangle. Each row's span is the hull's extent over the rows within 2 px,
-/// widened by 2 px, as the rectangle is; the whole image where the volume has no bounds on screen.
+/// Pixels as one span of columns a row over a rectangle: those whose real points can lie in one
+/// box's shadow volume from one light (shadow_spans), or those near some (pixels_near).
 struct VolumeSpans {
   Rect rect;
   std::vector<int> x0, x1;  ///< per row of rect: columns [x0, x1)
@@ -484,6 +482,10 @@ struct VolumeSpans {
   }
 };
 
+/// The pixels whose real points can lie in one box's shadow volume from one light: the volume
+/// projects into the convex hull of its screen_points, whose rows are narrower than its rectangle.
+/// Each row's span is the hull's extent over the rows within 2 px, widened by 2 px, as the
+/// rectangle is; the whole image where the volume has no bounds on screen.
 VolumeSpans shadow_spans(const core::Camera& cam, const core::Aabb& b, const VirtualLight& l, int w, int h) {
   VolumeSpans s;
   std::vector<glm::dvec2> pts;
