@@ -23,12 +23,13 @@ struct ArArgs {
   int threads = 0;
 };
 
-/// --scene (required), --room, the recording options, --threads.
+/// --scene (required), --room, the recording options, --depth-shift, --threads.
 inline void add_ar_options(CLI::App* cmd, ArArgs& a) {
   cmd->add_option("--scene", a.scene, "AR scene (JSON)")->required()->check(CLI::ExistingFile);
   cmd->add_option("--room", a.room, "a fused model of the recording's room (artrace fuse), the real scene instead of the per-frame depth mesh")
       ->check(CLI::ExistingFile);
   add_recording_options(cmd, a.rec);
+  add_depth_shift_option(cmd, a.rec.depth_shift);
   add_threads_option(cmd, a.threads);
 }
 

@@ -2,7 +2,9 @@
 // depth model, against the exact mask from the exact depth.
 #include "bench_util.h"
 #include "commands.h"
+#include "recording_options.h"
 
+#include "artrace/ar/depth_registration.h"
 #include "artrace/ar/occlusion.h"
 #include "artrace/ar/pinhole_intrinsics.h"
 #include "artrace/core/two_level_scene.h"
@@ -29,7 +31,7 @@ std::vector<core::Triangle> box(const glm::vec3& lo, const glm::vec3& hi) {
 }
 
 struct Options {
-  std::string scene, json, debug_png;
+  std::string scene, json, debug_png, depth_shift = "auto";
   int frames = 30, width = 640, height = 480, threads = 0;
   std::vector<float> box_lo{-0.45f, 0.0f, -1.3f}, box_hi{-0.05f, 1.1f, -0.75f};
   bool fuse = false;
@@ -63,6 +65,13 @@ void run(const Options& opt) {
     truth_frames.push_back(exact.render(k));
     frames.push_back(noisy.render(k));
   }
+  // the depth lined up with the colour, as the recording commands do (--depth-shift)
+  const ar::DepthShift shift = resolve_depth_shift(opt.depth_shift, [&] {
+    std::vector<const ar::SensorFrame*> views;
+    for (const ar::SensorFrame& f : frames) views.push_back(&f);
+    return ar::estimate_depth_shift(views);
+  });
+  for (ar::SensorFrame& f : frames) f.depth = ar::shift_depth(f.depth, shift);
   std::unique_ptr<ar::FusedRoom> room;
   double fuse_s = 0.0;
   if (opt.fuse) {
@@ -155,9 +164,11 @@ void run(const Options& opt) {
                 what, median(f.iou), f.iou.empty() ? 0.0 : *std::min_element(f.iou.begin(), f.iou.end()), median(f.boundary), worst(f.boundary),
                 f.over_1px, f.boundary.size(), median(f.jitter), worst(f.jitter), median(f.outline), median(f.ms));
   };
-  nlohmann::json out{{"scene", opt.scene}, {"frames", opt.frames}, {"width", opt.width}, {"height", opt.height}, {"sensor_depth", figures(sensor)}};
+  nlohmann::json out{{"scene", opt.scene}, {"frames", opt.frames}, {"width", opt.width}, {"height", opt.height},
+                     {"depth_shift", {shift.dx, shift.dy}}, {"sensor_depth", figures(sensor)}};
   std::printf("bench-occlusion %s, %d frames %dx%d, Kinect-like depth (medians over frames; boundary on the occlusion boundary only, "
-              "symmetric; jitter per pixel of true occlusion boundary):\n", opt.scene.c_str(), opt.frames, opt.width, opt.height);
+              "symmetric; jitter per pixel of true occlusion boundary), depth shifted %+d,%+d px:\n", opt.scene.c_str(), opt.frames, opt.width, opt.height,
+              shift.dx, shift.dy);
   print("sensor depth", sensor);
   if (room) {
     out["fused_room"] = figures(fused);
@@ -193,6 +204,7 @@ void add_bench_occlusion_command(CLI::App& app) {
       ->check(finite_range(0.1, 100.0));
   cmd->add_option("--voxel", opt->fusion.voxel_m, "--fuse: voxel edge (m)")->capture_default_str()->check(finite_range(0.001, 1.0));
   cmd->add_option("--truncation", opt->fusion.truncation_m, "--fuse: TSDF truncation (m)")->capture_default_str()->check(finite_range(0.002, 5.0));
+  add_depth_shift_option(cmd, opt->depth_shift);
   cmd->add_flag("--fuse", opt->fuse, "also measure with the room fused from the noisy frames (artrace fuse) cleaning the depth");
   cmd->callback([opt] { run(*opt); });
 }

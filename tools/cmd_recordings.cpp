@@ -117,6 +117,13 @@ nlohmann::json info_recording(const std::filesystem::path& path, const Recording
     if (reader->registered()) j["depth_registered_to_colour"] = *reader->registered();
   }
   j["warnings"] = src->warnings();
+  {
+    // what --depth-shift auto would find (export, replay, bench-ar and fuse apply it)
+    const ar::DepthShiftEstimate e = ar::estimate_depth_shift(*src);
+    j["depth_shift"] = {{"dx", e.best.dx}, {"dy", e.best.dy}, {"applied", e.confident}, {"colour_step", e.score},
+                        {"colour_step_unshifted", e.score_zero}, {"colour_step_two_px_off", e.score_ring},
+                        {"discontinuities", e.discontinuities}, {"summary", e.describe()}};
+  }
   if (planes_frame >= 0) {
     const int64_t n = src->frame_count().value_or(0);
     if (planes_frame >= n) throw std::invalid_argument("--frame " + std::to_string(planes_frame) + ": the recording has " + std::to_string(n) + " frames");
@@ -378,6 +385,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--json", opt->json, "write the figures as JSON");
     cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
     add_recording_options(cmd, opt->rec);
+    add_depth_shift_option(cmd, opt->rec.depth_shift);
     cmd->callback([opt] {
       auto in = open_recording(opt->source, opt->rec, opt->quiet);
       io::FusionStats st;

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <map>
 
 namespace artrace::io {
 namespace {
@@ -140,6 +141,40 @@ TEST(Export, SameFramesForAnyThreadCount) {
   ASSERT_EQ(frames[0].size(), 6u);
   ASSERT_EQ(frames[1].size(), 6u);
   for (size_t k = 0; k < 6; ++k) EXPECT_TRUE(frames[0][k] == frames[1][k]) << "frame " << k;
+  std::filesystem::remove_all(dir);
+}
+
+/// The export lines the depth up with the colour by itself: the bundled recording was made with the
+/// Kinect-like depth model, whose depth sits one pixel right of the colour. --depth-shift auto gives
+/// frames byte-identical to --depth-shift 1,0 and different from 0,0 (the depth as read), and says
+/// what it found.
+TEST(Export, DepthShiftAutoIsTheRecordingsOwnShift) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_export_depth_shift";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::map<std::string, std::vector<std::vector<char>>> frames;
+  for (const std::string shift : {"auto", "1,0", "0,0"}) {
+    const auto out = dir / (shift == "auto" ? "auto" : shift == "1,0" ? "one" : "none");
+    ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " export " + (kRoot / "data/recordings/room").string() + " --scene " +
+                  (kRoot / "data/ar/demo.json").string() + " -o " + out.string() + " --first 10 --last 12 --depth-shift " + shift +
+                  " > /dev/null 2> " + out.string() + ".log"),
+              0);
+    for (int k = 10; k <= 12; ++k) {
+      char name[32];
+      std::snprintf(name, sizeof name, "frame_%06d.png", k);
+      std::ifstream in(out / name, std::ios::binary);
+      ASSERT_TRUE(in) << (out / name);
+      frames[shift].emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    }
+  }
+  std::ifstream log(dir / "auto.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("note: depth shift +1,+0 px"), std::string::npos) << text;
+  for (size_t k = 0; k < 3; ++k) {
+    EXPECT_TRUE(frames["auto"][k] == frames["1,0"][k]) << "frame " << k;
+    EXPECT_FALSE(frames["auto"][k] == frames["0,0"][k]) << "frame " << k;
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -11,7 +11,8 @@
 //   3. alpha is refined with a joint bilateral filter guided by the colour image (C. Richardt et al.,
 //      "Coherent spatiotemporal filtering, upsampling and rendering of RGBZ videos", Eurographics
 //      2012, do this for RGBZ), which snaps the boundary to colour edges and blends it over a pixel
-//      or two, so a depth map offset from colour leaves no halo.
+//      or two. It pulls back part of a boundary that a depth map offset from the colour puts a
+//      pixel off, not all of it: the tools undo a whole-pixel offset first (depth_registration.h).
 #pragma once
 
 #include "artrace/ar/sensor_frame.h"
