@@ -20,16 +20,6 @@
 namespace artrace::tools {
 namespace {
 
-std::vector<core::Triangle> box(const glm::vec3& lo, const glm::vec3& hi) {
-  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
-                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
-  const int f[12][3] = {{0, 3, 2}, {0, 2, 1}, {4, 5, 6}, {4, 6, 7}, {0, 4, 7}, {0, 7, 3},
-                        {1, 2, 6}, {1, 6, 5}, {3, 7, 6}, {3, 6, 2}, {0, 1, 5}, {0, 5, 4}};
-  std::vector<core::Triangle> t;
-  for (const auto& k : f) t.push_back({v[k[0]], v[k[1]], v[k[2]]});
-  return t;
-}
-
 struct Options {
   std::string scene, json, debug_png, depth_shift = "auto";
   int frames = 30, width = 640, height = 480, threads = 0;
@@ -55,7 +45,7 @@ void run(const Options& opt) {
   so.depth_model = ar::DepthModel{};
   io::Synthesizer noisy(scene, so);
   core::TwoLevelScene virt;
-  virt.add_instance(virt.add_rigid_mesh(box({opt.box_lo[0], opt.box_lo[1], opt.box_lo[2]},
+  virt.add_instance(virt.add_rigid_mesh(core::box_triangles({opt.box_lo[0], opt.box_lo[1], opt.box_lo[2]},
                                             {opt.box_hi[0], opt.box_hi[1], opt.box_hi[2]})), glm::mat4(1.0f));
   virt.commit();
 

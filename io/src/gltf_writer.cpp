@@ -184,14 +184,8 @@ GltfModel make_spinning_box(float size, const glm::vec3& color) {
   GltfMesh mesh;
   const float h = 0.5f * size;
   const glm::vec3 lo(-h, 0.0f, -h), hi(h, size, h);
-  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
-                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
-  const int f[12][3] = {{0, 3, 2}, {0, 2, 1}, {4, 5, 6}, {4, 6, 7}, {0, 4, 7}, {0, 7, 3},
-                        {1, 2, 6}, {1, 6, 5}, {3, 7, 6}, {3, 6, 2}, {0, 1, 5}, {0, 5, 4}};
-  for (const auto& k : f) {
-    mesh.tris.push_back({v[k[0]], v[k[1]], v[k[2]]});
-    mesh.material.push_back(1);
-  }
+  mesh.tris = core::box_triangles(lo, hi);
+  mesh.material.assign(mesh.tris.size(), 1);
   m.meshes.push_back(mesh);
   GltfNode node;
   node.name = "box";

@@ -163,20 +163,10 @@ TEST(DepthRegistration, ShiftDepthAndTheShiftedSource) {
   EXPECT_NE(src.describe().find("depth shifted 1,-1 px"), std::string::npos) << src.describe();
 }
 
-std::vector<core::Triangle> box(const glm::vec3& lo, const glm::vec3& hi) {
-  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
-                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
-  const int f[12][3] = {{0, 3, 2}, {0, 2, 1}, {4, 5, 6}, {4, 6, 7}, {0, 4, 7}, {0, 7, 3},
-                        {1, 2, 6}, {1, 6, 5}, {3, 7, 6}, {3, 6, 2}, {0, 1, 5}, {0, 5, 4}};
-  std::vector<core::Triangle> t;
-  for (const auto& k : f) t.push_back({v[k[0]], v[k[1]], v[k[2]]});
-  return t;
-}
-
 TEST(DepthRegistration, UndoingTheShiftBringsTheOcclusionBoundaryToTheTruth) {
   // the box bench-occlusion uses, standing among the room's furniture
   core::TwoLevelScene virt;
-  virt.add_instance(virt.add_rigid_mesh(box({-0.45f, 0.0f, -1.3f}, {-0.05f, 1.1f, -0.75f})), glm::mat4(1.0f));
+  virt.add_instance(virt.add_rigid_mesh(core::box_triangles({-0.45f, 0.0f, -1.3f}, {-0.05f, 1.1f, -0.75f})), glm::mat4(1.0f));
   virt.commit();
   const std::vector<SensorFrame> exact = room_frames(8, std::nullopt), noisy = room_frames(8, DepthModel{});
   const DepthShift s = estimate_depth_shift(views(noisy)).shift;

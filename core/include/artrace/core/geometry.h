@@ -83,6 +83,18 @@ struct TriangleMesh {
 /// This is the exact arithmetic every traversal kernel uses, so it is also the brute-force oracle.
 bool intersect_triangle(const Ray& ray, const Triangle& tri, uint32_t prim, Hit& hit);
 
+/// The twelve triangles of the box [lo, hi], wound counter-clockwise seen from outside.
+inline std::vector<Triangle> box_triangles(const glm::vec3& lo, const glm::vec3& hi) {
+  const glm::vec3 v[8] = {{lo.x, lo.y, lo.z}, {hi.x, lo.y, lo.z}, {hi.x, hi.y, lo.z}, {lo.x, hi.y, lo.z},
+                          {lo.x, lo.y, hi.z}, {hi.x, lo.y, hi.z}, {hi.x, hi.y, hi.z}, {lo.x, hi.y, hi.z}};
+  constexpr int f[12][3] = {{0, 3, 2}, {0, 2, 1}, {4, 5, 6}, {4, 6, 7}, {0, 4, 7}, {0, 7, 3},
+                            {1, 2, 6}, {1, 6, 5}, {3, 7, 6}, {3, 6, 2}, {0, 1, 5}, {0, 5, 4}};
+  std::vector<Triangle> t;
+  t.reserve(12);
+  for (const auto& k : f) t.push_back({v[k[0]], v[k[1]], v[k[2]]});
+  return t;
+}
+
 /// Brute force over every triangle: the reference the acceleration structures are tested against.
 Hit intersect_brute_force(const Ray& ray, const std::vector<Triangle>& tris);
 bool occluded_brute_force(const Ray& ray, const std::vector<Triangle>& tris);
