@@ -196,12 +196,13 @@ void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask
   // the default's loop, with direct calls: shade_hit inline (one shared loop calling shading() by
   // name was measured at 0.6% more instructions a robots frame: GCC kept shading() out of line)
   const float* const static_uv = static_uv_per_world_.empty() ? nullptr : static_uv_per_world_.data();
-  // First every hit's attributes asked of memory, then each used: scattered hits miss the cache on
-  // each of the four arrays, and the misses overlap only when asked for ahead of the work.
+  // First every hit's batch found and its attributes asked of memory, then each used: scattered
+  // hits miss the cache on each of the arrays, and the misses overlap only when asked for ahead.
+  const TriangleBatch* batches[core::kPacketSize];
   for (int i = 0; i < core::kPacketSize; ++i) {
     if (!((mask >> i) & 1u)) continue;
     const core::Hit h = hits.get(i);
-    const TriangleBatch* b = anim_.batch(h);
+    const TriangleBatch* b = batches[i] = anim_.batch(h);
     if (!b || h.prim >= b->size()) continue;
     __builtin_prefetch(&b->normals[h.prim]);
     __builtin_prefetch(&b->uvs[h.prim]);
@@ -213,7 +214,7 @@ void BartSurfaces::shade_packet(const core::HitPacket& hits, core::LaneMask mask
     if (!((mask >> i) & 1u)) continue;
     const core::Hit h = hits.get(i);
     // the batch once: its material is what anim_.material() looks up again
-    const TriangleBatch* b = anim_.batch(h);
+    const TriangleBatch* b = batches[i];
     materials[i] = b ? b->material.at(h.prim) : anim_.material(h);
     shade_hit(anim_, b, h, world_tris[i], infos[i], static_uv);
   }

@@ -127,6 +127,35 @@ TEST(Triangle, RayBesideASharedEdgeTakesTheTriangleItCrosses) {
   EXPECT_EQ(exact.prim, 1u) << "the double-precision oracle agrees";
 }
 
+TEST(Box, TwelveTrianglesFacingOutCoverTheSurfaceOnce) {
+  const glm::vec3 lo(-1.0f, 0.5f, 2.0f), hi(2.0f, 1.5f, 2.5f), centre = 0.5f * (lo + hi);
+  const std::vector<Triangle> tris = box_triangles(lo, hi);
+  ASSERT_EQ(tris.size(), 12u);
+  const glm::vec3 e = hi - lo;
+  float area = 0.0f;
+  glm::vec3 flux(0.0f);  // sum of the area vectors: zero for a closed surface
+  for (const Triangle& t : tris) {
+    const glm::vec3 n = t.geometric_normal();  // twice the area, along the right-hand normal
+    area += 0.5f * glm::length(n);
+    flux += n;
+    // outward: the normal points away from the box's centre, along one axis only
+    EXPECT_GT(glm::dot(n, (t.v0 + t.v1 + t.v2) / 3.0f - centre), 0.0f);
+    EXPECT_EQ((n.x != 0.0f) + (n.y != 0.0f) + (n.z != 0.0f), 1);
+    for (const glm::vec3& v : {t.v0, t.v1, t.v2})
+      for (int a = 0; a < 3; ++a) EXPECT_TRUE(v[a] == lo[a] || v[a] == hi[a]);
+  }
+  EXPECT_NEAR(area, 2.0f * (e.x * e.y + e.y * e.z + e.z * e.x), 1e-5f);
+  EXPECT_NEAR(glm::length(flux), 0.0f, 1e-5f);
+  // a ray through the box crosses exactly two of its triangles (in and out)
+  const Ray ray{{0.3f, 1.0f, -5.0f}, {0.0f, 0.0f, 1.0f}};
+  int crossings = 0;
+  for (const Triangle& t : tris) {
+    Hit h;
+    crossings += intersect_triangle(ray, t, 0, h) ? 1 : 0;
+  }
+  EXPECT_EQ(crossings, 2);
+}
+
 TEST(TriangleMesh, FlattenChecksIndices) {
   TriangleMesh m;
   m.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
