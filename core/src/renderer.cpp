@@ -7,17 +7,20 @@
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
+#include <stdexcept>
+#include <string>
+
 namespace artrace::core {
 
-void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn) {
-  const int tiles_x = (width + kTileSize - 1) / kTileSize;
-  const int tiles_y = (height + kTileSize - 1) / kTileSize;
+void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn, int size) {
+  if (size <= 0) throw std::invalid_argument("for_each_tile: tile size " + std::to_string(size));
+  const int tiles_x = (width + size - 1) / size;
+  const int tiles_y = (height + size - 1) / size;
   const int count = tiles_x * tiles_y;
   auto body = [&](const tbb::blocked_range<int>& r) {
     for (int i = r.begin(); i != r.end(); ++i) {
       const int tx = i % tiles_x, ty = i / tiles_x;
-      const Tile t{tx * kTileSize, ty * kTileSize, std::min(width, (tx + 1) * kTileSize),
-                   std::min(height, (ty + 1) * kTileSize)};
+      const Tile t{tx * size, ty * size, std::min(width, (tx + 1) * size), std::min(height, (ty + 1) * size)};
       fn(t);
     }
   };

@@ -50,6 +50,13 @@ struct Counters {
 
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
+/// The image is handed out to the threads in blocks of kWaveBlock x kWaveBlock pixels (4 x 4 of
+/// the 8x8 tiles). A block's primary rays are traced tile by tile in 4 x kPacketRows packets; its
+/// reflection and refraction rays are pooled as one generation and regrouped by direction, so
+/// that more of them share a packet than within one tile. Results do not depend on the grouping:
+/// every lane's hit and colour are its own.
+constexpr int kWaveBlock = 4 * kTileSize;
+
 /// What every tile needs, worked out once per image.
 struct Prepared {
   /// Per material: below this cosine the highlight is under 1e-4; 2 for materials without one
@@ -210,12 +217,13 @@ Image render_whitted(const ShadingScene& scene, const Camera& cam, const Whitted
   const Prepared pre(scene);
   tbb::enumerable_thread_specific<Counters> counters;
   const ShadeCopy copy = shade_copy();
-  for_each_tile(cam.width, cam.height, opt.threads, [&](const Tile& t) {
+  const auto block = [&](const Tile& t) {
     const uint64_t t0 = ticks();
     Counters& c = counters.local();
     copy.tile(scene, cam, opt, pre, c, t, img);
     c.total_ticks += ticks_since(t0);
-  });
+  };
+  for_each_tile(cam.width, cam.height, opt.threads, block, kWaveBlock);
   if (stats) {
     WhittedStats s;
     s.wall_ms = ms(start, Clock::now());

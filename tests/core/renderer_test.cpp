@@ -1,6 +1,10 @@
 #include "artrace/core/renderer.h"
 #include "../test_util.h"
 
+#include <atomic>
+#include <stdexcept>
+#include <vector>
+
 namespace artrace::core {
 namespace {
 
@@ -50,12 +54,21 @@ TEST(Renderer, SquareCoversAnalyticPixels) {
 }
 
 TEST(Renderer, EveryTileVisitedOnce) {
-  std::vector<int> count(37 * 21, 0);
-  for_each_tile(37, 21, 2, [&](const Tile& t) {
-    for (int y = t.y0; y < t.y1; ++y)
-      for (int x = t.x0; x < t.x1; ++x) ++count[y * 37 + x];
-  });
-  for (const int c : count) EXPECT_EQ(c, 1);
+  for (const int size : {kTileSize, 5, 32}) {
+    std::vector<int> count(37 * 21, 0);
+    std::atomic<int> too_large{0};
+    for_each_tile(
+        37, 21, 2,
+        [&](const Tile& t) {
+          too_large += t.x1 - t.x0 > size || t.y1 - t.y0 > size || t.x0 % size != 0 || t.y0 % size != 0;
+          for (int y = t.y0; y < t.y1; ++y)
+            for (int x = t.x0; x < t.x1; ++x) ++count[y * 37 + x];
+        },
+        size);
+    for (const int c : count) EXPECT_EQ(c, 1) << "tile size " << size;
+    EXPECT_EQ(too_large.load(), 0) << "tile size " << size;
+  }
+  EXPECT_THROW(for_each_tile(8, 8, 1, [](const Tile&) {}, 0), std::invalid_argument);
 }
 
 }  // namespace
