@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 
@@ -348,6 +349,101 @@ TEST(Compositor, TheFusedRoomStandsInWhereTheSensorSawItsSurface) {
     }
   }
   EXPECT_EQ(wrong, 0);
+}
+
+/// The compositor cleans the sensor's depth with the fused room only around the objects; the
+/// hole filling there reads neighbours up to its reach outside their rectangle, which must have
+/// been cleaned too. The oracle: the same composite from the depth cleaned over the whole image
+/// (clean_depth) with no room. The sensor reads 2.03 m everywhere, within the noise of the room's
+/// wall at 2.0 m, except a patch of holes (6 x 10, 12 x 5 or 12 x 12 pixels, the last with a
+/// larger fillable hole) where the room has a slit too (nothing to stand in). The holes are filled
+/// from their neighbours pass by pass, from all sides of the patch, the far depth winning where
+/// they meet: uncleaned neighbours (2.03) reach into the rectangle as far as the passes go. A thin box 2.01 m away covers the
+/// middle of the image: where the filled depth is 2.0 the wall hides it (mostly), where it is 2.03
+/// it shows. The patch is put at each position around the box's left edge in turn, so that its
+/// neighbours straddle the edge of the box's screen rectangle.
+TEST(Compositor, CleaningAroundTheObjectsGivesTheWholeImageCleaningsPicture) {
+  const float z_wall = 2.0f;
+  const glm::vec3 lo((60.5f - static_cast<float>(kCx)) / static_cast<float>(kF) * 2.01f,
+                     (40.5f - static_cast<float>(kCy)) / static_cast<float>(kF) * 2.01f, 2.01f);
+  const glm::vec3 hi((100.5f - static_cast<float>(kCx)) / static_cast<float>(kF) * 2.01f,
+                     (80.5f - static_cast<float>(kCy)) / static_cast<float>(kF) * 2.01f, 2.02f);
+  core::TwoLevelScene scene(core::TwoLevelScene::Config::kBvh);
+  scene.add_instance(scene.add_rigid_mesh(box(lo, hi)), glm::mat4(1.0f));
+  scene.commit();
+  const MaterialLookup diffuse = [](const core::Hit&) {
+    return VirtualMaterial{VirtualMaterial::kDiffuse, glm::vec3(0.8f), 1.5f};
+  };
+  int differing_inside = 0;
+  // patches of 6 x 10 and 12 x 5 pixels (at most 64: holes small enough to fill by default), and
+  // 12 x 12 with a larger fillable hole, so that the far side's depth travels all passes in
+  for (int patch = 0; patch < 3; ++patch) {
+    for (int column = 52; column <= 70; ++column) {
+      const int width = patch == 0 ? 6 : 12;
+      const int row0 = 50, row1 = row0 + (patch == 2 ? 12 : 60 / width);
+      const int col0 = column - width / 2, col1 = col0 + width;  // the holes' columns
+      // the room: the wall with a slit around the rays of the holes' pixel centres
+      auto quad = [](RoomMesh& m, float x0, float y0, float x1, float y1) {
+        const uint32_t b = static_cast<uint32_t>(m.positions.size());
+        for (const glm::vec3& p :
+             {glm::vec3(x0, y0, 2.0f), glm::vec3(x1, y0, 2.0f), glm::vec3(x1, y1, 2.0f), glm::vec3(x0, y1, 2.0f)}) {
+          m.positions.push_back(p);
+          m.colours.push_back(glm::vec3(0.5f));
+        }
+        m.triangles.push_back({b, b + 1, b + 2});
+        m.triangles.push_back({b, b + 2, b + 3});
+      };
+      // (pixel centres at whole coordinates, as in the intrinsics)
+      const float pixel = z_wall / static_cast<float>(kF);  // a pixel's width on the wall
+      const float sx0 = (static_cast<float>(col0) - 0.5f - static_cast<float>(kCx)) * pixel;
+      const float sx1 = (static_cast<float>(col1) - 0.5f - static_cast<float>(kCx)) * pixel;
+      const float sy0 = (static_cast<float>(row0) - 0.5f - static_cast<float>(kCy)) * pixel;
+      const float sy1 = (static_cast<float>(row1) - 0.5f - static_cast<float>(kCy)) * pixel;
+      RoomMesh mesh;
+      quad(mesh, -5.0f, -5.0f, sx0, 5.0f);
+      quad(mesh, sx1, -5.0f, 5.0f, 5.0f);
+      quad(mesh, sx0, -5.0f, sx1, sy0);
+      quad(mesh, sx0, sy1, sx1, 5.0f);
+      const FusedRoom room(std::move(mesh));
+
+      SensorFrame frame = wall_frame();
+      std::fill(frame.depth.depth_m.begin(), frame.depth.depth_m.end(), 2.03f);
+      for (int y = row0; y < row1; ++y) {
+        for (int x = col0; x < col1; ++x) frame.depth.depth_m[static_cast<size_t>(y) * kW + x] = 0.0f;
+      }
+      CompositeOptions opt;
+      opt.shadows = false;
+      opt.room = &room;
+      opt.threads = 2;
+      opt.keep_visibility = true;
+      if (patch == 2) opt.occlusion_options.max_hole_px = 144;
+      CompositeStats got_stats;
+      const ColorImage got = composite(frame, scene, diffuse, opt, &got_stats);
+
+      // the oracle: the depth cleaned over the whole image, composited without the room
+      SensorFrame cleaned = frame;
+      cleaned.depth = clean_depth(frame, opt, 0, 0, kW, kH);
+      ASSERT_EQ(cleaned.depth.depth_m[static_cast<size_t>(row0) * kW + col0], 0.0f) << "the slit leaves the holes";
+      ASSERT_EQ(cleaned.depth.depth_m[static_cast<size_t>(row1 - 1) * kW + col1 - 1], 0.0f)
+          << "the slit leaves the holes";
+      ASSERT_EQ(cleaned.depth.depth_m[static_cast<size_t>(row0) * kW + col0 - 1], z_wall) << "the wall stands in";
+      ASSERT_EQ(cleaned.depth.depth_m[static_cast<size_t>(row1) * kW + col0], z_wall) << "the wall stands in";
+      CompositeOptions whole = opt;
+      whole.room = nullptr;
+      CompositeStats want_stats;
+      const ColorImage want = composite(cleaned, scene, diffuse, whole, &want_stats);
+      EXPECT_TRUE(got.rgb == want.rgb) << "patch " << width << " wide at column " << col0
+                                       << ": the picture differs from the whole image cleaning's";
+      EXPECT_TRUE(got_stats.visibility == want_stats.visibility) << "patch " << width << " wide at column " << col0;
+
+      // the depth cleaned over the box's screen rectangle alone (no margin) gives another picture
+      // at some column: the scene can tell a missing margin
+      SensorFrame inside = frame;
+      inside.depth = clean_depth(frame, opt, 59, 39, 102, 82);
+      differing_inside += composite(inside, scene, diffuse, whole).rgb != want.rgb;
+    }
+  }
+  EXPECT_GT(differing_inside, 0) << "cleaning without a margin gives the same pictures: the scene tests nothing";
 }
 
 /// An object whose shadow volume projects wholly beside the image (its rows overlap the image's, its
