@@ -28,9 +28,9 @@ struct Tile {
   int x0, y0, x1, y1;  ///< pixel range [x0, x1) x [y0, y1)
 };
 
-/// Calls `fn` once for every 8x8 tile (`size` x `size`) of a width x height image, on `threads`
-/// workers (0 = all cores). Tiles are independent, so the result does not depend on the thread
-/// count.
+/// Calls `fn` once for every `size` x `size` tile (8x8 unless asked otherwise) of a width x
+/// height image, on `threads` workers (0 = all cores). Tiles are independent, so the result does
+/// not depend on the thread count.
 void for_each_tile(int width, int height, int threads, const std::function<void(const Tile&)>& fn,
                    int size = kTileSize);
 
