@@ -51,9 +51,9 @@ struct Counters {
 inline float max3(const glm::vec3& v) { return std::max(v.x, std::max(v.y, v.z)); }
 
 /// The image is handed out to the threads in blocks of kWaveBlock x kWaveBlock pixels (4 x 4 of
-/// the 8x8 tiles). A block's primary rays are traced tile by tile in 4 x kPacketRows packets; its
-/// reflection and refraction rays are pooled as one generation and regrouped by direction, so
-/// that more of them share a packet than within one tile. Results do not depend on the grouping:
+/// the 8x8 tiles). A block's primary rays are traced in 4 x kPacketRows packets; its reflection
+/// and refraction rays are pooled as one generation and regrouped by direction, so that more of
+/// them share a packet than within one tile. Results do not depend on the grouping:
 /// every lane's hit and colour are its own.
 constexpr int kWaveBlock = 4 * kTileSize;
 

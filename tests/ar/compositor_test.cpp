@@ -301,6 +301,17 @@ TEST(Compositor, ABoxBehindTheCameraShadowsTheWallInFront) {
   EXPECT_LT(st.shadow_area_pixels, kW * kH);
 }
 
+/// A grey rectangle [x0, x1] x [y0, y1] at depth z, two triangles, added to a room mesh.
+void room_quad(RoomMesh& m, float x0, float y0, float x1, float y1, float z) {
+  const uint32_t b = static_cast<uint32_t>(m.positions.size());
+  for (const glm::vec3& p : {glm::vec3(x0, y0, z), glm::vec3(x1, y0, z), glm::vec3(x1, y1, z), glm::vec3(x0, y1, z)}) {
+    m.positions.push_back(p);
+    m.colours.push_back(glm::vec3(0.5f));
+  }
+  m.triangles.push_back({b, b + 1, b + 2});
+  m.triangles.push_back({b, b + 2, b + 3});
+}
+
 /// The fused room cleaning the sensor's depth, against depths worked out by hand. The room: a wall
 /// at 2.01 m and, over the image's top half, a panel at 1 m in front of it (a chair since moved
 /// away: the sensor sees the wall through it). Columns of readings: 2.0 m (within the noise of the
@@ -308,18 +319,9 @@ TEST(Compositor, ABoxBehindTheCameraShadowsTheWallInFront) {
 /// the near side (taken), 1.5 m (something the room does not hold: kept), and none (the room's
 /// nearest surface: the panel in the top half, the wall below).
 TEST(Compositor, TheFusedRoomStandsInWhereTheSensorSawItsSurface) {
-  auto quad = [](RoomMesh& m, float x0, float y0, float x1, float y1, float z) {
-    const uint32_t b = static_cast<uint32_t>(m.positions.size());
-    for (const glm::vec3& p : {glm::vec3(x0, y0, z), glm::vec3(x1, y0, z), glm::vec3(x1, y1, z), glm::vec3(x0, y1, z)}) {
-      m.positions.push_back(p);
-      m.colours.push_back(glm::vec3(0.5f));
-    }
-    m.triangles.push_back({b, b + 1, b + 2});
-    m.triangles.push_back({b, b + 2, b + 3});
-  };
   RoomMesh mesh;
-  quad(mesh, -5.0f, -5.0f, 5.0f, 5.0f, 2.01f);
-  quad(mesh, -5.0f, -5.0f, 5.0f, -0.001f, 1.0f);  // camera y down: the image's top half
+  room_quad(mesh, -5.0f, -5.0f, 5.0f, 5.0f, 2.01f);
+  room_quad(mesh, -5.0f, -5.0f, 5.0f, -0.001f, 1.0f);  // camera y down: the image's top half
   const FusedRoom room(std::move(mesh));
   // Nguyen et al.'s sigma, three of them, and the disparity step 0.4 % of z^2 a metre
   auto tolerance = [](double z) { return 3.0 * (0.0012 + 0.0019 * (z - 0.4) * (z - 0.4)) + 0.004 * z * z; };
@@ -358,9 +360,9 @@ TEST(Compositor, TheFusedRoomStandsInWhereTheSensorSawItsSurface) {
 /// wall at 2.0 m, except a patch of holes (6 x 10, 12 x 5 or 12 x 12 pixels, the last with a
 /// larger fillable hole) where the room has a slit too (nothing to stand in). The holes are filled
 /// from their neighbours pass by pass, from all sides of the patch, the far depth winning where
-/// they meet: uncleaned neighbours (2.03) reach into the rectangle as far as the passes go. A thin box 2.01 m away covers the
-/// middle of the image: where the filled depth is 2.0 the wall hides it (mostly), where it is 2.03
-/// it shows. The patch is put at each position around the box's left edge in turn, so that its
+/// they meet: uncleaned neighbours (2.03) reach into the rectangle as far as the passes go. A thin
+/// box 2.01 m away covers the middle of the image: where the filled depth is 2.0 the wall hides it
+/// (mostly), where it is 2.03 it shows. The patch is put at each position around the box's left edge in turn, so that its
 /// neighbours straddle the edge of the box's screen rectangle.
 TEST(Compositor, CleaningAroundTheObjectsGivesTheWholeImageCleaningsPicture) {
   const float z_wall = 2.0f;
@@ -383,16 +385,6 @@ TEST(Compositor, CleaningAroundTheObjectsGivesTheWholeImageCleaningsPicture) {
       const int row0 = 50, row1 = row0 + (patch == 2 ? 12 : 60 / width);
       const int col0 = column - width / 2, col1 = col0 + width;  // the holes' columns
       // the room: the wall with a slit around the rays of the holes' pixel centres
-      auto quad = [](RoomMesh& m, float x0, float y0, float x1, float y1) {
-        const uint32_t b = static_cast<uint32_t>(m.positions.size());
-        for (const glm::vec3& p :
-             {glm::vec3(x0, y0, 2.0f), glm::vec3(x1, y0, 2.0f), glm::vec3(x1, y1, 2.0f), glm::vec3(x0, y1, 2.0f)}) {
-          m.positions.push_back(p);
-          m.colours.push_back(glm::vec3(0.5f));
-        }
-        m.triangles.push_back({b, b + 1, b + 2});
-        m.triangles.push_back({b, b + 2, b + 3});
-      };
       // (pixel centres at whole coordinates, as in the intrinsics)
       const float pixel = z_wall / static_cast<float>(kF);  // a pixel's width on the wall
       const float sx0 = (static_cast<float>(col0) - 0.5f - static_cast<float>(kCx)) * pixel;
@@ -400,10 +392,10 @@ TEST(Compositor, CleaningAroundTheObjectsGivesTheWholeImageCleaningsPicture) {
       const float sy0 = (static_cast<float>(row0) - 0.5f - static_cast<float>(kCy)) * pixel;
       const float sy1 = (static_cast<float>(row1) - 0.5f - static_cast<float>(kCy)) * pixel;
       RoomMesh mesh;
-      quad(mesh, -5.0f, -5.0f, sx0, 5.0f);
-      quad(mesh, sx1, -5.0f, 5.0f, 5.0f);
-      quad(mesh, sx0, -5.0f, sx1, sy0);
-      quad(mesh, sx0, sy1, sx1, 5.0f);
+      room_quad(mesh, -5.0f, -5.0f, sx0, 5.0f, z_wall);
+      room_quad(mesh, sx1, -5.0f, 5.0f, 5.0f, z_wall);
+      room_quad(mesh, sx0, -5.0f, sx1, sy0, z_wall);
+      room_quad(mesh, sx0, sy1, sx1, 5.0f, z_wall);
       const FusedRoom room(std::move(mesh));
 
       SensorFrame frame = wall_frame();
@@ -436,8 +428,8 @@ TEST(Compositor, CleaningAroundTheObjectsGivesTheWholeImageCleaningsPicture) {
                                        << ": the picture differs from the whole image cleaning's";
       EXPECT_TRUE(got_stats.visibility == want_stats.visibility) << "patch " << width << " wide at column " << col0;
 
-      // the depth cleaned over the box's screen rectangle alone (no margin) gives another picture
-      // at some column: the scene can tell a missing margin
+      // the depth cleaned over about the box's screen rectangle (its pixels and one around) with
+      // no margin gives another picture at some column: the scene can tell a missing margin
       SensorFrame inside = frame;
       inside.depth = clean_depth(frame, opt, 59, 39, 102, 82);
       differing_inside += composite(inside, scene, diffuse, whole).rgb != want.rgb;
