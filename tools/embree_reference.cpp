@@ -138,24 +138,31 @@ EmbreeBatch::~EmbreeBatch() = default;
 
 void EmbreeBatch::restore() { std::memcpy(impl_->live.data, impl_->pristine.data, impl_->pristine.bytes); }
 
+const char* to_string(EmbreeQuality q) { return q == EmbreeQuality::kHigh ? "HIGH" : "MEDIUM"; }
+
 EmbreeReference::EmbreeReference(const std::vector<core::Triangle>& tris, int threads) : tris_(tris) {
   const std::string config = "threads=" + std::to_string(threads);
   device_ = rtcNewDevice(config.c_str());
   if (!device_) throw std::runtime_error("Embree: cannot create a device");
-  build();
+  build(EmbreeQuality::kHigh);
+  build(EmbreeQuality::kMedium);
 }
 
 EmbreeReference::~EmbreeReference() {
-  if (scene_) rtcReleaseScene(scene_);
+  for (RTCScene s : scenes_) {
+    if (s) rtcReleaseScene(s);
+  }
   if (device_) rtcReleaseDevice(device_);
 }
 
-void EmbreeReference::build() {
-  if (scene_) rtcReleaseScene(scene_);
-  scene_ = rtcNewScene(device_);
-  rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+void EmbreeReference::build(EmbreeQuality q) {
+  RTCScene& scene = scenes_[static_cast<int>(q)];
+  if (scene) rtcReleaseScene(scene);
+  scene = rtcNewScene(device_);
+  const RTCBuildQuality quality = q == EmbreeQuality::kHigh ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM;
+  rtcSetSceneBuildQuality(scene, quality);
   RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-  rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
+  rtcSetGeometryBuildQuality(geom, quality);
   auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                         3 * sizeof(float), 3 * tris_.size()));
   auto* idx = static_cast<unsigned*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
@@ -167,9 +174,9 @@ void EmbreeReference::build() {
     idx[3 * i + 2] = static_cast<unsigned>(3 * i + 2);
   }
   rtcCommitGeometry(geom);
-  rtcAttachGeometry(scene_, geom);
+  rtcAttachGeometry(scene, geom);
   rtcReleaseGeometry(geom);
-  rtcCommitScene(scene_);
+  rtcCommitScene(scene);
 }
 
 namespace {
@@ -188,7 +195,8 @@ void occluded_calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t l
 
 }  // namespace
 
-void EmbreeReference::intersect(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+void EmbreeReference::intersect(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+  RTCScene scene = scenes_[static_cast<int>(q)];
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
@@ -196,16 +204,17 @@ void EmbreeReference::intersect(EmbreeBatch& batch, size_t first, size_t last, b
   switch (batch.width()) {
     case 1: {
       auto* rh = static_cast<RTCRayHit*>(b.live.data);
-      for (size_t c = first; c < last; ++c) rtcIntersect1(scene_, &ctx, &rh[c]);
+      for (size_t c = first; c < last; ++c) rtcIntersect1(scene, &ctx, &rh[c]);
       break;
     }
-    case 4: intersect_calls<4>(scene_, b, first, last, &ctx); break;
-    case 8: intersect_calls<8>(scene_, b, first, last, &ctx); break;
-    default: intersect_calls<16>(scene_, b, first, last, &ctx); break;
+    case 4: intersect_calls<4>(scene, b, first, last, &ctx); break;
+    case 8: intersect_calls<8>(scene, b, first, last, &ctx); break;
+    default: intersect_calls<16>(scene, b, first, last, &ctx); break;
   }
 }
 
-void EmbreeReference::occluded(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+void EmbreeReference::occluded(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+  RTCScene scene = scenes_[static_cast<int>(q)];
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
@@ -213,12 +222,12 @@ void EmbreeReference::occluded(EmbreeBatch& batch, size_t first, size_t last, bo
   switch (batch.width()) {
     case 1: {
       auto* rh = static_cast<RTCRayHit*>(b.live.data);
-      for (size_t c = first; c < last; ++c) rtcOccluded1(scene_, &ctx, &rh[c].ray);
+      for (size_t c = first; c < last; ++c) rtcOccluded1(scene, &ctx, &rh[c].ray);
       break;
     }
-    case 4: occluded_calls<4>(scene_, b, first, last, &ctx); break;
-    case 8: occluded_calls<8>(scene_, b, first, last, &ctx); break;
-    default: occluded_calls<16>(scene_, b, first, last, &ctx); break;
+    case 4: occluded_calls<4>(scene, b, first, last, &ctx); break;
+    case 8: occluded_calls<8>(scene, b, first, last, &ctx); break;
+    default: occluded_calls<16>(scene, b, first, last, &ctx); break;
   }
 }
 

@@ -1,9 +1,11 @@
 // Embree as a side-by-side reference in benchmarks only; the product's traversal is its own.
 //
-// Set up as Embree's documentation advises, at its best for each kind of ray: a HIGH-quality BVH
-// for static geometry; RTC_INTERSECT_CONTEXT_FLAG_COHERENT for coherent packets (camera rays), the
-// default (incoherent) context for single and bounce rays, and both for shadow packets, of which
-// the faster counts. Rays are converted to Embree's layouts before any timing, and its hits back
+// Set up as Embree's documentation advises, at its best for each kind of ray: BVHs of both the
+// HIGH build quality (the documentation's choice for final-frame rendering) and the MEDIUM one
+// (its default), each kind of ray timed through both and the faster counting;
+// RTC_INTERSECT_CONTEXT_FLAG_COHERENT for coherent packets (camera rays), the default
+// (incoherent) context for single and bounce rays, and both for shadow packets, of which the
+// faster counts. Rays are converted to Embree's layouts before any timing, and its hits back
 // after: a timed pass holds Embree's calls and nothing else.
 #pragma once
 
@@ -40,19 +42,25 @@ class EmbreeBatch {
   std::vector<size_t> first_call_;  ///< per packet, and one past the last
 };
 
+/// The build qualities the reference times rays through.
+enum class EmbreeQuality { kHigh = 0, kMedium = 1 };
+const char* to_string(EmbreeQuality q);
+
 class EmbreeReference {
  public:
+  /// One device of `threads` threads; a scene of each quality.
   EmbreeReference(const std::vector<core::Triangle>& tris, int threads);
   ~EmbreeReference();
   EmbreeReference(const EmbreeReference&) = delete;
   EmbreeReference& operator=(const EmbreeReference&) = delete;
 
-  /// (Re)builds the scene with RTC_BUILD_QUALITY_HIGH.
-  void build();
-  /// Closest hits of calls [first, last) of a batch; `coherent` chooses the context flag.
-  void intersect(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
+  /// (Re)builds the scene of quality `q`.
+  void build(EmbreeQuality q);
+  /// Closest hits of calls [first, last) of a batch through the scene of quality `q`; `coherent`
+  /// chooses the context flag.
+  void intersect(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
   /// Any hits likewise.
-  void occluded(EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
+  void occluded(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
   /// After a pass: the primitive hit by each of our lanes (kInvalidId: none), packet by packet.
   static void hits(const EmbreeBatch& batch, std::vector<uint32_t>& prim);
   /// After an occlusion pass: the blocked lanes of each of our packets.
@@ -61,7 +69,7 @@ class EmbreeReference {
  private:
   const std::vector<core::Triangle>& tris_;
   RTCDevice device_ = nullptr;
-  RTCScene scene_ = nullptr;
+  RTCScene scenes_[2] = {nullptr, nullptr};  ///< by EmbreeQuality
 };
 
 }  // namespace artrace::tools

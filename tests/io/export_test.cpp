@@ -234,6 +234,24 @@ TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
     EXPECT_EQ(e.at("shadow_disagreeing_lanes_wrong").at("artrace").get<size_t>(), 0u) << "lanes " << lanes;
     for (const char* key : {"primary_single", "primary_packet_4", "primary_packet_8", "primary_packet_16", "shadow", "incoherent"})
       EXPECT_GT(e.at("rays").at(key).get<double>(), 0.0) << key;
+    // every kind of ray through both of Embree's BVHs, the faster one's rate the one compared
+    EXPECT_GT(e.at("build_ms").get<double>(), 0.0);
+    EXPECT_GT(e.at("build_ms_medium").get<double>(), 0.0);
+    for (const char* key : {"primary_single", "primary_packet_4", "primary_packet_8", "primary_packet_16",
+                            "shadow_incoherent_flag", "shadow_coherent_flag", "incoherent"}) {
+      const double high = e.at("rays").at(std::string(key) + "_HIGH").get<double>();
+      const double medium = e.at("rays").at(std::string(key) + "_MEDIUM").get<double>();
+      EXPECT_GT(high, 0.0) << key;
+      EXPECT_GT(medium, 0.0) << key;
+      EXPECT_EQ(e.at("rays").at(key).get<double>(), std::max(high, medium)) << key;
+      EXPECT_EQ(e.at("quality").at(key).get<std::string>(), high >= medium ? "HIGH" : "MEDIUM") << key;
+    }
+    const nlohmann::json& r = e.at("rays");
+    EXPECT_EQ(r.at("primary_packet").get<double>(),
+              std::max({r.at("primary_packet_4").get<double>(), r.at("primary_packet_8").get<double>(),
+                        r.at("primary_packet_16").get<double>()}));
+    EXPECT_EQ(r.at("shadow").get<double>(),
+              std::max(r.at("shadow_incoherent_flag").get<double>(), r.at("shadow_coherent_flag").get<double>()));
   }
   std::filesystem::remove_all(dir);
 }
