@@ -84,6 +84,8 @@ namespace avx512 {
 /// Packets in one 16-wide pass (one-half packets go to the AVX2 set); call only when the CPU has
 /// AVX-512 F, VL, DQ and BW.
 const PacketKernels& kernels();
+/// The wide BVH's single-ray kernels, 8-wide node tests with AVX-512's 32 vector registers.
+const SingleRayKernels& single_kernels();
 }  // namespace avx512
 
 /// The packet kernels chosen by set_simd_level (simd_dispatch.cpp).

@@ -42,7 +42,8 @@ const PacketKernels& kernels_for(SimdLevel level) {
 }
 
 const SingleRayKernels& single_for(SimdLevel level) {
-  return level == SimdLevel::kAvx512 || level == SimdLevel::kAvx2 ? avx2::single_kernels() : sse::single_kernels();
+  if (level == SimdLevel::kAvx512) return avx512::single_kernels();
+  return level == SimdLevel::kAvx2 ? avx2::single_kernels() : sse::single_kernels();
 }
 
 SimdLevel g_level = resolve(SimdLevel::kAuto);

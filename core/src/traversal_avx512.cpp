@@ -14,6 +14,7 @@
 namespace artrace::core::avx512 {
 #include "simd.inc"
 #include "traversal.inc"
+#include "wide_traversal.inc"
 
 namespace {
 
@@ -70,6 +71,11 @@ const PacketKernels& kernels() {
                                       &bvh_intersect_packet,       &bvh_occluded_packet,
                                       &two_level_intersect_packet, &two_level_occluded_packet,
                                       &transmittance_packet,       &two_level_transmittance_packet};
+  return kSet;
+}
+
+const SingleRayKernels& single_kernels() {
+  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1};
   return kSet;
 }
 
