@@ -118,7 +118,7 @@ nlohmann::json info_recording(const std::filesystem::path& path, const Recording
   }
   j["warnings"] = src->warnings();
   {
-    // what --depth-shift auto would find (export, replay, bench-ar and fuse apply it)
+    // what --depth-shift auto would find (export, replay, bench-ar, fuse and track apply it)
     const ar::DepthShiftEstimate e = ar::estimate_depth_shift(*src);
     j["depth_shift"] = {{"dx", e.best.dx}, {"dy", e.best.dy}, {"applied", e.confident}, {"colour_step", e.score},
                         {"colour_step_unshifted", e.score_zero}, {"colour_step_two_px_off", e.score_ring},
@@ -322,6 +322,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--frames", opt->odometry.max_frames, "frames to track (0 = all)")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->add_option("--json", opt->json, "write the drift report as JSON");
     add_recording_options(cmd, opt->rec);
+    add_depth_shift_option(cmd, opt->rec.depth_shift);
     cmd->callback([opt] {
       auto in = open_recording(opt->source, opt->rec);
       const auto t0 = std::chrono::steady_clock::now();

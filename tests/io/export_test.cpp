@@ -178,6 +178,36 @@ TEST(Export, DepthShiftAutoIsTheRecordingsOwnShift) {
   std::filesystem::remove_all(dir);
 }
 
+/// track lines the depth up with the colour as export does: on the bundled recording (its depth
+/// one pixel right of the colour) --depth-shift auto finds +1,+0 and gives the trajectory of
+/// --depth-shift 1,0, which follows the recording's own poses more closely than the depth as read.
+TEST(Track, DepthShiftAutoLinesTheDepthUpAndTracksCloser) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = std::filesystem::temp_directory_path() / "artrace_track_depth_shift";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  std::map<std::string, nlohmann::json> drift;
+  std::map<std::string, std::string> poses;
+  for (const std::string shift : {"auto", "1,0", "0,0"}) {
+    const auto out = dir / (shift == "auto" ? "auto" : shift == "1,0" ? "one" : "none");
+    ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " track " + (kRoot / "data/recordings/room").string() + " -o " + out.string() +
+                  ".txt --json " + out.string() + ".json --depth-shift " + shift + " > /dev/null 2> " + out.string() + ".log"),
+              0);
+    drift[shift] = nlohmann::json::parse(std::ifstream(out.string() + ".json")).at("drift");
+    std::ifstream in(out.string() + ".txt");
+    poses[shift].assign((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  std::ifstream log(dir / "auto.log");
+  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("note: depth shift +1,+0 px"), std::string::npos) << text;
+  ASSERT_FALSE(poses["auto"].empty());
+  EXPECT_EQ(poses["auto"], poses["1,0"]);
+  EXPECT_NE(poses["auto"], poses["0,0"]);
+  EXPECT_LT(drift["auto"].at("rms_m").get<double>(), drift["0,0"].at("rms_m").get<double>());
+  EXPECT_LT(drift["auto"].at("final_m").get<double>(), drift["0,0"].at("final_m").get<double>());
+  std::filesystem::remove_all(dir);
+}
+
 /// A real Kinect recording (OpenNI 1.x, 16zT depth, JPEG colour) through the whole AR path: a green
 /// box 0.6 m in front of the fixed camera (the camera frame: y down, z forward), nearer than the
 /// desk and the person, is drawn at the centre of every frame.
