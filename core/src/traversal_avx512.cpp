@@ -1,7 +1,9 @@
-// 16-wide kernels. This file alone is compiled for AVX-512 (F, VL, DQ, BW; FMA contraction stays
-// off, so its hits match the other widths bit for bit); it is reached only through
-// simd_dispatch.cpp after the CPU reported those extensions. A packet with lanes in one half only
-// goes to the AVX2 kernel (callers with 8-ray packets would otherwise pay for 16 lanes).
+// 16-wide kernels, and the wide BVH's 8-wide single-ray kernel with AVX-512's 32 vector
+// registers (the AVX2 build spills its ray to the stack). This file alone is compiled for AVX-512
+// (F, VL, DQ, BW; FMA contraction stays off, so its hits match the other widths bit for bit); it
+// is reached only through simd_dispatch.cpp after the CPU reported those extensions. A packet
+// with lanes in one half only goes to the AVX2 kernel (callers with 8-ray packets would otherwise
+// pay for 16 lanes).
 #include "kernels.h"
 
 #include <atomic>
