@@ -371,9 +371,10 @@ void run(const Options& opt) {
 #if defined(ARTRACE_HAVE_EMBREE)
     EmbreeReference ref(tris, threads);
     nlohmann::json e;
-    e["setup"] = "BVHs of RTC_BUILD_QUALITY_HIGH and MEDIUM, each kind of ray timed through both (the faster counts); camera "
-                 "packets RTC_INTERSECT_CONTEXT_FLAG_COHERENT, single and bounce rays the default incoherent context, shadow "
-                 "packets both (the faster counts); rays converted before and hits after the timed passes";
+    e["setup"] =
+        "BVHs of RTC_BUILD_QUALITY_HIGH and MEDIUM, each kind of ray timed through both (the faster counts); camera "
+        "packets RTC_INTERSECT_CONTEXT_FLAG_COHERENT, single and bounce rays the default incoherent context, shadow "
+        "packets both (the faster counts); rays converted before and hits after the timed passes";
     e["build_ms"] = median_ms(opt.runs, [&] { ref.build(EmbreeQuality::kHigh); });
     e["build_ms_medium"] = median_ms(opt.runs, [&] { ref.build(EmbreeQuality::kMedium); });
     // a timed pass over a batch: the tiles' calls, in parallel as ours are traced
@@ -383,8 +384,10 @@ void run(const Options& opt) {
         parallel_tiles(arena, tiles, [&](size_t t) {
           const size_t first = batch.first_call(std::min(w_packets, t * w_per_tile));
           const size_t last = batch.first_call(std::min(w_packets, (t + 1) * w_per_tile));
-          if (occlusion) ref.occluded(q, batch, first, last, coherent);
-          else ref.intersect(q, batch, first, last, coherent);
+          if (occlusion)
+            ref.occluded(q, batch, first, last, coherent);
+          else
+            ref.intersect(q, batch, first, last, coherent);
         });
       };
     };
@@ -395,8 +398,9 @@ void run(const Options& opt) {
       EmbreeQuality best = EmbreeQuality::kHigh;
       double best_rate = -1.0;
       for (const EmbreeQuality q : {EmbreeQuality::kHigh, EmbreeQuality::kMedium}) {
-        const double r = mrays(rays, median_ms(opt.runs, [&] { batch.restore(); },
-                                               embree_pass(q, batch, w_per_tile, w_packets, occlusion, coherent)));
+        const double r = mrays(rays, median_ms(
+                                         opt.runs, [&] { batch.restore(); },
+                                         embree_pass(q, batch, w_per_tile, w_packets, occlusion, coherent)));
         e["rays"][key + "_" + to_string(q)] = r;
         if (r > best_rate) {
           best_rate = r;
@@ -409,7 +413,8 @@ void run(const Options& opt) {
     };
     // camera rays: rtcIntersect1, and packets of 4, 8 and 16 (coherent); their best width counts
     EmbreeBatch single_batch(primary.packets, primary.masks, 1);
-    const EmbreeQuality single_q = faster("primary_single", primary.rays, single_batch, per_tile, primary.packets.size(), false, false);
+    const EmbreeQuality single_q =
+        faster("primary_single", primary.rays, single_batch, per_tile, primary.packets.size(), false, false);
     const auto embree_single_pass = embree_pass(single_q, single_batch, per_tile, primary.packets.size(), false, false);
     single_batch.restore();
     embree_single_pass();
@@ -442,17 +447,19 @@ void run(const Options& opt) {
     const auto embree_packet_pass = embree_pass(packet_q, *best_batch, per_tile, primary.packets.size(), false, true);
     // shadow packets: the width of our packets, both context flags through both BVHs
     EmbreeBatch shadow_batch(shadow.packets, shadow.masks, opt.lanes);
-    const EmbreeQuality shadow_q_incoherent =
-        faster("shadow_incoherent_flag", shadow.rays, shadow_batch, per_tile_shadow, shadow.packets.size(), true, false);
+    const EmbreeQuality shadow_q_incoherent = faster("shadow_incoherent_flag", shadow.rays, shadow_batch,
+                                                     per_tile_shadow, shadow.packets.size(), true, false);
     const EmbreeQuality shadow_q_coherent =
         faster("shadow_coherent_flag", shadow.rays, shadow_batch, per_tile_shadow, shadow.packets.size(), true, true);
     const bool shadow_coherent =
         e["rays"]["shadow_coherent_flag"].get<double>() > e["rays"]["shadow_incoherent_flag"].get<double>();
     const EmbreeQuality shadow_q = shadow_coherent ? shadow_q_coherent : shadow_q_incoherent;
-    e["rays"]["shadow"] = std::max(e["rays"]["shadow_incoherent_flag"].get<double>(), e["rays"]["shadow_coherent_flag"].get<double>());
+    e["rays"]["shadow"] =
+        std::max(e["rays"]["shadow_incoherent_flag"].get<double>(), e["rays"]["shadow_coherent_flag"].get<double>());
     e["quality"]["shadow"] = to_string(shadow_q);
     e["shadow_flag"] = shadow_coherent ? "coherent" : "incoherent";
-    const auto embree_shadow_pass = embree_pass(shadow_q, shadow_batch, per_tile_shadow, shadow.packets.size(), true, shadow_coherent);
+    const auto embree_shadow_pass =
+        embree_pass(shadow_q, shadow_batch, per_tile_shadow, shadow.packets.size(), true, shadow_coherent);
     shadow_batch.restore();
     embree_shadow_pass();
     std::vector<LaneMask> embree_blocked;
@@ -474,7 +481,8 @@ void run(const Options& opt) {
     e["shadow_disagreeing_lanes_wrong"] = {{"artrace", ours_wrong}, {"embree", embree_wrong}};
     // incoherent bounce rays: rtcIntersect1
     EmbreeBatch bounce_batch(bounce.packets, bounce.masks, 1);
-    const EmbreeQuality bounce_q = faster("incoherent", bounce.rays, bounce_batch, per_tile, bounce.packets.size(), false, false);
+    const EmbreeQuality bounce_q =
+        faster("incoherent", bounce.rays, bounce_batch, per_tile, bounce.packets.size(), false, false);
     const auto embree_bounce_pass = embree_pass(bounce_q, bounce_batch, per_tile, bounce.packets.size(), false, false);
     // Speed ratios (ours / Embree's best) from runs taken in turns, the median of the per-pair
     // ratios: the machine's drift over the benchmark cancels out.
@@ -513,20 +521,23 @@ void run(const Options& opt) {
   if (out.contains("embree")) {
     const nlohmann::json& e = out["embree"];
     const nlohmann::json& r = e["rays"];
-    auto both = [&](const std::string& key) {
-      return r[key + "_HIGH"].get<double>() > r[key + "_MEDIUM"].get<double>() ? "HIGH" : "MEDIUM";
-    };
-    std::printf("  embree builds: HIGH %.1f ms, MEDIUM %.1f ms; rays through both BVHs, Mrays/s HIGH / MEDIUM: single %.2f / %.2f, "
-                "incoherent %.2f / %.2f\n",
-                e["build_ms"].get<double>(), e["build_ms_medium"].get<double>(), r["primary_single_HIGH"].get<double>(),
-                r["primary_single_MEDIUM"].get<double>(), r["incoherent_HIGH"].get<double>(), r["incoherent_MEDIUM"].get<double>());
-    std::printf("  embree's best camera packet width %d (4: %.2f, 8: %.2f, 16: %.2f Mrays/s, coherent, each through its faster "
-                "BVH); shadow packets incoherent flag %.2f (%s), coherent %.2f (%s); the faster BVH for camera packets %s, "
-                "shadow %s\n",
-                e["primary_packet_best_width"].get<int>(), r["primary_packet_4"].get<double>(), r["primary_packet_8"].get<double>(),
-                r["primary_packet_16"].get<double>(), r["shadow_incoherent_flag"].get<double>(), both("shadow_incoherent_flag"),
-                r["shadow_coherent_flag"].get<double>(), both("shadow_coherent_flag"),
-                e["quality"]["primary_packet"].get<std::string>().c_str(), e["quality"]["shadow"].get<std::string>().c_str());
+    auto quality = [&](const char* key) { return e["quality"][key].get<std::string>(); };
+    std::printf(
+        "  embree builds: HIGH %.1f ms, MEDIUM %.1f ms; rays through both BVHs, Mrays/s HIGH / MEDIUM: single %.2f / "
+        "%.2f, "
+        "incoherent %.2f / %.2f\n",
+        e["build_ms"].get<double>(), e["build_ms_medium"].get<double>(), r["primary_single_HIGH"].get<double>(),
+        r["primary_single_MEDIUM"].get<double>(), r["incoherent_HIGH"].get<double>(),
+        r["incoherent_MEDIUM"].get<double>());
+    std::printf(
+        "  embree's best camera packet width %d (4: %.2f, 8: %.2f, 16: %.2f Mrays/s, coherent, each through its faster "
+        "BVH); shadow packets incoherent flag %.2f (%s), coherent %.2f (%s); the faster BVH for camera packets %s, "
+        "shadow %s\n",
+        e["primary_packet_best_width"].get<int>(), r["primary_packet_4"].get<double>(),
+        r["primary_packet_8"].get<double>(), r["primary_packet_16"].get<double>(),
+        r["shadow_incoherent_flag"].get<double>(), quality("shadow_incoherent_flag").c_str(),
+        r["shadow_coherent_flag"].get<double>(), quality("shadow_coherent_flag").c_str(),
+        quality("primary_packet").c_str(), quality("shadow").c_str());
     std::printf("  speed ratio artrace / embree's best, runs in turns (median of %d pairs, order alternating): primary_single %.3f "
                 "(kd-tree %.3f), primary_packet %.3f, shadow %.3f, shadow_hinted %.3f, incoherent %.3f (kd-tree %.3f)\n",
                 opt.runs, e["paired_ratio"]["primary_single"].get<double>(), e["paired_ratio"]["primary_single_kdtree"].get<double>(),

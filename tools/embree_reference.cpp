@@ -207,9 +207,15 @@ void EmbreeReference::intersect(EmbreeQuality q, EmbreeBatch& batch, size_t firs
       for (size_t c = first; c < last; ++c) rtcIntersect1(scene, &ctx, &rh[c]);
       break;
     }
-    case 4: intersect_calls<4>(scene, b, first, last, &ctx); break;
-    case 8: intersect_calls<8>(scene, b, first, last, &ctx); break;
-    default: intersect_calls<16>(scene, b, first, last, &ctx); break;
+    case 4:
+      intersect_calls<4>(scene, b, first, last, &ctx);
+      break;
+    case 8:
+      intersect_calls<8>(scene, b, first, last, &ctx);
+      break;
+    default:
+      intersect_calls<16>(scene, b, first, last, &ctx);
+      break;
   }
 }
 
@@ -225,9 +231,15 @@ void EmbreeReference::occluded(EmbreeQuality q, EmbreeBatch& batch, size_t first
       for (size_t c = first; c < last; ++c) rtcOccluded1(scene, &ctx, &rh[c].ray);
       break;
     }
-    case 4: occluded_calls<4>(scene, b, first, last, &ctx); break;
-    case 8: occluded_calls<8>(scene, b, first, last, &ctx); break;
-    default: occluded_calls<16>(scene, b, first, last, &ctx); break;
+    case 4:
+      occluded_calls<4>(scene, b, first, last, &ctx);
+      break;
+    case 8:
+      occluded_calls<8>(scene, b, first, last, &ctx);
+      break;
+    default:
+      occluded_calls<16>(scene, b, first, last, &ctx);
+      break;
   }
 }
 

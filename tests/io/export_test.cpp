@@ -190,8 +190,9 @@ TEST(Track, DepthShiftAutoLinesTheDepthUpAndTracksCloser) {
   std::map<std::string, std::string> poses;
   for (const std::string shift : {"auto", "1,0", "0,0"}) {
     const auto out = dir / (shift == "auto" ? "auto" : shift == "1,0" ? "one" : "none");
-    ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " track " + (kRoot / "data/recordings/room").string() + " -o " + out.string() +
-                  ".txt --json " + out.string() + ".json --depth-shift " + shift + " > /dev/null 2> " + out.string() + ".log"),
+    ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " track " + (kRoot / "data/recordings/room").string() + " -o " +
+                  out.string() + ".txt --json " + out.string() + ".json --depth-shift " + shift + " > /dev/null 2> " +
+                  out.string() + ".log"),
               0);
     drift[shift] = nlohmann::json::parse(std::ifstream(out.string() + ".json")).at("drift");
     std::ifstream in(out.string() + ".txt");
