@@ -391,30 +391,30 @@ void run(const Options& opt) {
         });
       };
     };
-    // A kind of ray through both BVHs: each rate kept as key_HIGH and key_MEDIUM, the faster as
-    // key; returns the faster quality.
+    // A kind of ray through both BVHs: each rate kept as key_HIGH and key_MEDIUM, the faster (and
+    // its BVH) as key; returns the faster.
+    struct Faster {
+      EmbreeQuality quality = EmbreeQuality::kHigh;
+      double rate = -1.0;
+    };
     auto faster = [&](const std::string& key, size_t rays, EmbreeBatch& batch, size_t w_per_tile, size_t w_packets,
                       bool occlusion, bool coherent) {
-      EmbreeQuality best = EmbreeQuality::kHigh;
-      double best_rate = -1.0;
+      Faster best;
       for (const EmbreeQuality q : {EmbreeQuality::kHigh, EmbreeQuality::kMedium}) {
         const double r = mrays(rays, median_ms(
                                          opt.runs, [&] { batch.restore(); },
                                          embree_pass(q, batch, w_per_tile, w_packets, occlusion, coherent)));
         e["rays"][key + "_" + to_string(q)] = r;
-        if (r > best_rate) {
-          best_rate = r;
-          best = q;
-        }
+        if (r > best.rate) best = Faster{q, r};
       }
-      e["rays"][key] = best_rate;
-      e["quality"][key] = to_string(best);
+      e["rays"][key] = best.rate;
+      e["quality"][key] = to_string(best.quality);
       return best;
     };
     // camera rays: rtcIntersect1, and packets of 4, 8 and 16 (coherent); their best width counts
     EmbreeBatch single_batch(primary.packets, primary.masks, 1);
     const EmbreeQuality single_q =
-        faster("primary_single", primary.rays, single_batch, per_tile, primary.packets.size(), false, false);
+        faster("primary_single", primary.rays, single_batch, per_tile, primary.packets.size(), false, false).quality;
     const auto embree_single_pass = embree_pass(single_q, single_batch, per_tile, primary.packets.size(), false, false);
     single_batch.restore();
     embree_single_pass();
@@ -426,40 +426,36 @@ void run(const Options& opt) {
         if ((primary.masks[p] >> i) & 1u) agree += embree_prim[p * kPacketSize + i] == hits[p].prim[i];
     e["primary_agreement"] = static_cast<double>(agree) / std::max<size_t>(1, primary.rays);
     int best_width = 0;
-    double best_packet = 0.0;
-    EmbreeQuality packet_q = EmbreeQuality::kHigh;
+    Faster packet;
     std::unique_ptr<EmbreeBatch> best_batch;
     for (const int width : {4, 8, 16}) {
       auto batch = std::make_unique<EmbreeBatch>(primary.packets, primary.masks, width);
-      const std::string key = "primary_packet_" + std::to_string(width);
-      const EmbreeQuality q = faster(key, primary.rays, *batch, per_tile, primary.packets.size(), false, true);
-      const double r = e["rays"][key].get<double>();
-      if (r > best_packet) {
-        best_packet = r;
+      const Faster f = faster("primary_packet_" + std::to_string(width), primary.rays, *batch, per_tile,
+                              primary.packets.size(), false, true);
+      if (f.rate > packet.rate) {
+        packet = f;
         best_width = width;
-        packet_q = q;
         best_batch = std::move(batch);
       }
     }
-    e["rays"]["primary_packet"] = best_packet;
-    e["quality"]["primary_packet"] = to_string(packet_q);
+    e["rays"]["primary_packet"] = packet.rate;
+    e["quality"]["primary_packet"] = to_string(packet.quality);
     e["primary_packet_best_width"] = best_width;
-    const auto embree_packet_pass = embree_pass(packet_q, *best_batch, per_tile, primary.packets.size(), false, true);
+    const auto embree_packet_pass =
+        embree_pass(packet.quality, *best_batch, per_tile, primary.packets.size(), false, true);
     // shadow packets: the width of our packets, both context flags through both BVHs
     EmbreeBatch shadow_batch(shadow.packets, shadow.masks, opt.lanes);
-    const EmbreeQuality shadow_q_incoherent = faster("shadow_incoherent_flag", shadow.rays, shadow_batch,
-                                                     per_tile_shadow, shadow.packets.size(), true, false);
-    const EmbreeQuality shadow_q_coherent =
+    const Faster shadow_incoherent = faster("shadow_incoherent_flag", shadow.rays, shadow_batch, per_tile_shadow,
+                                            shadow.packets.size(), true, false);
+    const Faster shadow_coherent_flag =
         faster("shadow_coherent_flag", shadow.rays, shadow_batch, per_tile_shadow, shadow.packets.size(), true, true);
-    const bool shadow_coherent =
-        e["rays"]["shadow_coherent_flag"].get<double>() > e["rays"]["shadow_incoherent_flag"].get<double>();
-    const EmbreeQuality shadow_q = shadow_coherent ? shadow_q_coherent : shadow_q_incoherent;
-    e["rays"]["shadow"] =
-        std::max(e["rays"]["shadow_incoherent_flag"].get<double>(), e["rays"]["shadow_coherent_flag"].get<double>());
-    e["quality"]["shadow"] = to_string(shadow_q);
+    const bool shadow_coherent = shadow_coherent_flag.rate > shadow_incoherent.rate;
+    const Faster shadow_best = shadow_coherent ? shadow_coherent_flag : shadow_incoherent;
+    e["rays"]["shadow"] = shadow_best.rate;
+    e["quality"]["shadow"] = to_string(shadow_best.quality);
     e["shadow_flag"] = shadow_coherent ? "coherent" : "incoherent";
     const auto embree_shadow_pass =
-        embree_pass(shadow_q, shadow_batch, per_tile_shadow, shadow.packets.size(), true, shadow_coherent);
+        embree_pass(shadow_best.quality, shadow_batch, per_tile_shadow, shadow.packets.size(), true, shadow_coherent);
     shadow_batch.restore();
     embree_shadow_pass();
     std::vector<LaneMask> embree_blocked;
@@ -482,7 +478,7 @@ void run(const Options& opt) {
     // incoherent bounce rays: rtcIntersect1
     EmbreeBatch bounce_batch(bounce.packets, bounce.masks, 1);
     const EmbreeQuality bounce_q =
-        faster("incoherent", bounce.rays, bounce_batch, per_tile, bounce.packets.size(), false, false);
+        faster("incoherent", bounce.rays, bounce_batch, per_tile, bounce.packets.size(), false, false).quality;
     const auto embree_bounce_pass = embree_pass(bounce_q, bounce_batch, per_tile, bounce.packets.size(), false, false);
     // Speed ratios (ours / Embree's best) from runs taken in turns, the median of the per-pair
     // ratios: the machine's drift over the benchmark cancels out.
@@ -523,9 +519,8 @@ void run(const Options& opt) {
     const nlohmann::json& r = e["rays"];
     auto quality = [&](const char* key) { return e["quality"][key].get<std::string>(); };
     std::printf(
-        "  embree builds: HIGH %.1f ms, MEDIUM %.1f ms; rays through both BVHs, Mrays/s HIGH / MEDIUM: single %.2f / "
-        "%.2f, "
-        "incoherent %.2f / %.2f\n",
+        "  embree builds: HIGH %.1f ms, MEDIUM %.1f ms; rays through both BVHs, Mrays/s HIGH / MEDIUM: "
+        "single %.2f / %.2f, incoherent %.2f / %.2f\n",
         e["build_ms"].get<double>(), e["build_ms_medium"].get<double>(), r["primary_single_HIGH"].get<double>(),
         r["primary_single_MEDIUM"].get<double>(), r["incoherent_HIGH"].get<double>(),
         r["incoherent_MEDIUM"].get<double>());

@@ -13,6 +13,13 @@ namespace {
 template <int N>
 struct Width;
 template <>
+struct Width<1> {  // rtcIntersect1 / rtcOccluded1 take no valid mask
+  using RayHit = RTCRayHit;
+  using Ray = RTCRay;
+  static void intersect(const int*, RTCScene s, RTCIntersectContext* c, RayHit* rh) { rtcIntersect1(s, c, rh); }
+  static void occluded(const int*, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded1(s, c, r); }
+};
+template <>
 struct Width<4> {
   using RayHit = RTCRayHit4;
   using Ray = RTCRay4;
@@ -181,66 +188,45 @@ void EmbreeReference::build(EmbreeQuality q) {
 
 namespace {
 
-template <int N>
-void intersect_calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t last, RTCIntersectContext* ctx) {
+/// Calls [first, last) of a batch of width N: closest hits, or any hits (Occluded).
+template <bool Occluded, int N>
+void calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t last, RTCIntersectContext* ctx) {
   auto* rh = static_cast<typename Width<N>::RayHit*>(b.live.data);
-  for (size_t c = first; c < last; ++c) Width<N>::intersect(&b.valid[c * N], scene, ctx, &rh[c]);
-}
-
-template <int N>
-void occluded_calls(RTCScene scene, EmbreeBatch::Impl& b, size_t first, size_t last, RTCIntersectContext* ctx) {
-  auto* rh = static_cast<typename Width<N>::RayHit*>(b.live.data);
-  for (size_t c = first; c < last; ++c) Width<N>::occluded(&b.valid[c * N], scene, ctx, &rh[c].ray);
+  for (size_t c = first; c < last; ++c) {
+    const int* valid = N == 1 ? nullptr : &b.valid[c * N];
+    if constexpr (Occluded) {
+      Width<N>::occluded(valid, scene, ctx, &rh[c].ray);
+    } else {
+      Width<N>::intersect(valid, scene, ctx, &rh[c]);
+    }
+  }
 }
 
 }  // namespace
 
-void EmbreeReference::intersect(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+template <bool Occluded>
+void EmbreeReference::trace(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
   RTCScene scene = scenes_[static_cast<int>(q)];
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
   EmbreeBatch::Impl& b = *batch.impl_;
+  // clang-format off
   switch (batch.width()) {
-    case 1: {
-      auto* rh = static_cast<RTCRayHit*>(b.live.data);
-      for (size_t c = first; c < last; ++c) rtcIntersect1(scene, &ctx, &rh[c]);
-      break;
-    }
-    case 4:
-      intersect_calls<4>(scene, b, first, last, &ctx);
-      break;
-    case 8:
-      intersect_calls<8>(scene, b, first, last, &ctx);
-      break;
-    default:
-      intersect_calls<16>(scene, b, first, last, &ctx);
-      break;
+    case 1: calls<Occluded, 1>(scene, b, first, last, &ctx); break;
+    case 4: calls<Occluded, 4>(scene, b, first, last, &ctx); break;
+    case 8: calls<Occluded, 8>(scene, b, first, last, &ctx); break;
+    default: calls<Occluded, 16>(scene, b, first, last, &ctx); break;
   }
+  // clang-format on
+}
+
+void EmbreeReference::intersect(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
+  trace<false>(q, batch, first, last, coherent);
 }
 
 void EmbreeReference::occluded(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const {
-  RTCScene scene = scenes_[static_cast<int>(q)];
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-  EmbreeBatch::Impl& b = *batch.impl_;
-  switch (batch.width()) {
-    case 1: {
-      auto* rh = static_cast<RTCRayHit*>(b.live.data);
-      for (size_t c = first; c < last; ++c) rtcOccluded1(scene, &ctx, &rh[c].ray);
-      break;
-    }
-    case 4:
-      occluded_calls<4>(scene, b, first, last, &ctx);
-      break;
-    case 8:
-      occluded_calls<8>(scene, b, first, last, &ctx);
-      break;
-    default:
-      occluded_calls<16>(scene, b, first, last, &ctx);
-      break;
-  }
+  trace<true>(q, batch, first, last, coherent);
 }
 
 void EmbreeReference::hits(const EmbreeBatch& batch, std::vector<uint32_t>& prim) {

@@ -67,6 +67,9 @@ class EmbreeReference {
   static void blocked(const EmbreeBatch& batch, std::vector<core::LaneMask>& blocked);
 
  private:
+  template <bool Occluded>
+  void trace(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
+
   const std::vector<core::Triangle>& tris_;
   RTCDevice device_ = nullptr;
   RTCScene scenes_[2] = {nullptr, nullptr};  ///< by EmbreeQuality
