@@ -98,6 +98,14 @@ TEST(WideBvh, AdversarialCasesEqualBruteForce) {
   rays.push_back(Ray{{-2, 0, 0.5f}, {1, 0, 0}});
   rays.push_back(Ray{{1, 0.5f, -3}, {0, 0, 1}});
   rays.push_back(Ray{{1, 1, -3}, {0, 0, 1}});
+  // segments reaching behind their origin (tmin < 0), which the kernels widen by magnitude
+  const size_t forward = rays.size();
+  for (size_t i = 0; i < forward; i += 2) {
+    Ray r = rays[i];
+    r.org += 6.0f * r.dir / glm::length(r.dir);
+    r.tmin = -12.0f / glm::length(r.dir);
+    rays.push_back(r);
+  }
   for (const uint32_t max_leaf : {1u, 8u, 32u}) {
     WideBvhBuildOptions opt;
     opt.max_leaf = max_leaf;
