@@ -296,7 +296,7 @@ void walk(const WideBvh& bvh, uint32_t ref, double area, double inv_root, uint32
   }
   ++s.nodes;
   s.sah_cost += area * inv_root * opt.node_cost;
-  const WideNode& n = bvh.nodes()[ref];
+  const WideNode& n = bvh.nodes()[wide_node_index(ref)];
   for (int c = 0; c < 8; ++c) {
     if (n.child[c] == WideNode::kEmpty) continue;
     Aabb b;
@@ -314,6 +314,15 @@ WideBvh::WideBvh(const std::vector<Triangle>& tris, const WideBvhBuildOptions& o
   root_ = builder.build(sub);
   nodes_ = std::move(sub.nodes);
   blocks_ = std::move(sub.blocks);
+  // inner children by byte offset (see WideNode)
+  if (nodes_.size() > kMaxWideNodes) throw std::length_error("wide BVH: more nodes than references can address");
+  const auto to_offset = [](uint32_t& ref) {
+    if (ref != WideNode::kEmpty && !WideNode::is_leaf(ref)) ref = wide_node_ref(ref);
+  };
+  for (WideNode& n : nodes_) {
+    for (uint32_t& c : n.child) to_offset(c);
+  }
+  to_offset(root_);
 }
 
 Hit WideBvh::intersect(const Ray& ray) const {
@@ -334,7 +343,7 @@ WideBvhStats WideBvh::stats(const WideBvhBuildOptions& opt) const {
     return s;
   }
   Aabb root;
-  const WideNode& n = nodes_[root_];
+  const WideNode& n = nodes_[wide_node_index(root_)];
   for (int c = 0; c < 8; ++c) {
     if (n.child[c] == WideNode::kEmpty) continue;
     root.extend(glm::vec3(n.lo[0][c], n.lo[1][c], n.lo[2][c]));

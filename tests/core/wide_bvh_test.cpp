@@ -229,7 +229,10 @@ TEST(WideBvh, EveryTriangleOnceInsideItsBoxes) {
       EXPECT_LE(in_leaf, opt.max_leaf);
       return;
     }
-    const WideNode& n = bvh.nodes()[ref];
+    // an inner reference is its node's byte offset in the array
+    ASSERT_EQ(ref % sizeof(WideNode), 0u) << "reference " << ref;
+    ASSERT_LT(wide_node_index(ref), bvh.nodes().size()) << "reference " << ref;
+    const WideNode& n = bvh.nodes()[wide_node_index(ref)];
     int used = 0;
     for (int c = 0; c < 8; ++c) {
       if (n.child[c] == WideNode::kEmpty) continue;

@@ -28,7 +28,9 @@
 namespace artrace::core {
 
 /// Eight children: their boxes as structure of arrays (an unused slot has lo = +inf, hi = -inf,
-/// which no ray meets) and their references.
+/// which no ray meets) and their references. An inner child's reference is its byte offset in the
+/// node array (index * sizeof(WideNode)): the kernels add it to the array's address, with no
+/// multiplication between loading a reference and loading its node.
 struct alignas(32) WideNode {
   float lo[3][8];
   float hi[3][8];
@@ -45,6 +47,12 @@ struct alignas(32) WideNode {
   static uint32_t block_count(uint32_t ref) { return (ref & 7u) + 1u; }
 };
 static_assert(sizeof(WideNode) == 224, "a wide node is seven 32-byte lines");
+
+/// Nodes a hierarchy can hold: their byte offsets stay below WideNode::kLeafBit.
+inline constexpr uint32_t kMaxWideNodes = WideNode::kLeafBit / sizeof(WideNode);
+/// An inner child's reference from its node's index, and back.
+inline uint32_t wide_node_ref(uint32_t index) { return index * static_cast<uint32_t>(sizeof(WideNode)); }
+inline uint32_t wide_node_index(uint32_t ref) { return ref / static_cast<uint32_t>(sizeof(WideNode)); }
 
 /// Triangles a leaf block holds: one 8-wide test (an AVX register, two SSE halves).
 inline constexpr int kBlockLanes = 8;
