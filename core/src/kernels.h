@@ -50,6 +50,9 @@ struct PacketKernels {
 struct SingleRayKernels {
   Hit (*intersect)(const WideBvhView&, const Ray&);
   bool (*occluded)(const WideBvhView&, const Ray&);
+  /// Closest hits of a coherent packet's lanes in `mask`, a direction octant's rays as one
+  /// frustum; null in the sets without it (narrower frustums did not pay: see WideBvh).
+  void (*intersect_packet)(const WideBvhView&, const RayPacket&, LaneMask, HitPacket&);
 };
 
 namespace sse {
@@ -84,7 +87,8 @@ namespace avx512 {
 /// Packets in one 16-wide pass (one-half packets go to the AVX2 set); call only when the CPU has
 /// AVX-512 F, VL, DQ and BW.
 const PacketKernels& kernels();
-/// The wide BVH's single-ray kernels, 8-wide node tests with AVX-512's 32 vector registers.
+/// The wide BVH's single-ray kernels, 8-wide node tests with AVX-512's 32 vector registers, and
+/// its 16-ray frustum packets.
 const SingleRayKernels& single_kernels();
 }  // namespace avx512
 

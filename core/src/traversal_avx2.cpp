@@ -74,7 +74,7 @@ const PacketKernels& kernels() {
 }
 
 const SingleRayKernels& single_kernels() {
-  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1};
+  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1, nullptr};
   return kSet;
 }
 

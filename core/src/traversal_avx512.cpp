@@ -1,9 +1,9 @@
-// 16-wide kernels, and the wide BVH's 8-wide single-ray kernel with AVX-512's 32 vector
-// registers (the AVX2 build spills its ray to the stack). This file alone is compiled for AVX-512
-// (F, VL, DQ, BW; FMA contraction stays off, so its hits match the other widths bit for bit); it
-// is reached only through simd_dispatch.cpp after the CPU reported those extensions. A packet
-// with lanes in one half only goes to the AVX2 kernel (callers with 8-ray packets would otherwise
-// pay for 16 lanes).
+// 16-wide kernels, the wide BVH's 8-wide single-ray kernel with AVX-512's 32 vector registers
+// (the AVX2 build spills its ray to the stack), and its 16-ray frustum packets. This file alone is
+// compiled for AVX-512 (F, VL, DQ, BW; FMA contraction stays off, so its hits match the other
+// widths bit for bit); it is reached only through simd_dispatch.cpp after the CPU reported those
+// extensions. A kd-tree packet with lanes in one half only goes to the AVX2 kernel (callers with
+// 8-ray packets would otherwise pay for 16 lanes).
 #include "kernels.h"
 
 #include <atomic>
@@ -66,6 +66,10 @@ LaneMask two_level_transmittance_packet(const TwoLevelView& scene, const RayPack
   return trace_two_level_packet<16, true, true>(scene, rays, 0, mask, nullptr, trans);
 }
 
+void wide_intersect_packet(const WideBvhView& bvh, const RayPacket& rays, LaneMask mask, HitPacket& hits) {
+  wide_trace_lanes<16>(bvh, rays, 0, mask, &hits);
+}
+
 }  // namespace
 
 const PacketKernels& kernels() {
@@ -77,7 +81,7 @@ const PacketKernels& kernels() {
 }
 
 const SingleRayKernels& single_kernels() {
-  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1};
+  static constexpr SingleRayKernels kSet{&wide_intersect1, &wide_occluded1, &wide_intersect_packet};
   return kSet;
 }
 

@@ -330,6 +330,26 @@ Hit WideBvh::intersect(const Ray& ray) const {
   return single_ray_kernels().intersect(view(), ray);
 }
 
+void WideBvh::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const {
+  mask &= kAllLanes;
+  const SingleRayKernels& k = single_ray_kernels();
+  if (!empty() && k.intersect_packet) return k.intersect_packet(view(), rays, mask, hits);
+  for (LaneMask m = mask; m; m &= m - 1) {  // a ray at a time
+    const int i = __builtin_ctz(m);
+    const Hit h = intersect(rays.get(i));
+    hits.t[i] = h.valid() ? h.t : rays.tmax[i];
+    hits.u[i] = h.u;
+    hits.v[i] = h.v;
+    hits.prim[i] = h.prim;
+    hits.inst[i] = kInvalidId;
+  }
+}
+
+bool WideBvh::traces_frustums(LaneMask mask) {
+  mask &= kAllLanes;
+  return single_ray_kernels().intersect_packet != nullptr && (mask & 0xffu) != 0 && (mask >> 8) != 0;
+}
+
 bool WideBvh::occluded(const Ray& ray) const {
   if (empty()) return false;
   return single_ray_kernels().occluded(view(), ray);

@@ -5,6 +5,8 @@
 
 #include <tbb/task_arena.h>
 
+#include <algorithm>
+#include <array>
 #include <cstring>
 #include <functional>
 #include <limits>
@@ -123,6 +125,160 @@ TEST(WideBvh, SliversLeaningOffBoxPlanesEqualBruteForce) {
   for (int i = 0; i < 50; ++i) rays.push_back(Ray{{1.0f + 0.04f * i, 3.0f, 0.5f}, {0.1f, 1.0f, 0.0f}});  // above it all, going up
   const WideBvh bvh(tris);
   on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "slivers, " + level); });
+}
+
+/// 16 rays of a 4x4 pixel block, as a pinhole camera at `o` looking along `ahead` casts them
+/// (pixel pitch `pitch` radians), each origin moved by up to `spread` (shadow-ray-like packets).
+RayPacket camera_packet(std::mt19937& rng, glm::vec3 o, glm::vec3 ahead, float pitch, float spread) {
+  ahead = glm::normalize(ahead);
+  const glm::vec3 side =
+      glm::normalize(glm::cross(ahead, std::fabs(ahead.y) < 0.9f ? glm::vec3(0, 1, 0) : glm::vec3(1, 0, 0)));
+  const glm::vec3 up = glm::cross(side, ahead);
+  RayPacket p;
+  for (int i = 0; i < kPacketSize; ++i) {
+    const glm::vec3 d = ahead + pitch * ((i % 4 - 1.5f) * side + (i / 4 - 1.5f) * up);
+    p.set(i, Ray{o + test::random_point(rng, -spread, spread), d});
+  }
+  return p;
+}
+
+/// Packets give each lane in their mask the single ray's Hit, bit for bit, leave the other lanes
+/// alone, and trace frustums where the kernels say so.
+void expect_packets_equal_brute_force(const WideBvh& bvh, const std::vector<Triangle>& tris,
+                                      const std::vector<std::pair<RayPacket, LaneMask>>& packets,
+                                      const std::string& what) {
+  size_t wrong = 0, hits = 0, lanes = 0, frustums = 0;
+  for (size_t k = 0; k < packets.size(); ++k) {
+    const auto& [rays, mask] = packets[k];
+    HitPacket got;
+    for (int i = 0; i < kPacketSize; ++i) {
+      got.t[i] = -1.0f - i;
+      got.u[i] = got.v[i] = -2.0f;
+      got.prim[i] = got.inst[i] = 1000000u + i;
+    }
+    bvh.intersect(rays, mask, got);
+    frustums += WideBvh::traces_frustums(mask);
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (!((mask >> i) & 1u)) {
+        if ((got.t[i] != -1.0f - i || got.prim[i] != 1000000u + i || got.inst[i] != 1000000u + i) && ++wrong <= 5)
+          ADD_FAILURE() << what << ": packet " << k << " lane " << i << " is outside the mask but was written";
+        continue;
+      }
+      ++lanes;
+      const Hit ref = intersect_brute_force(rays.get(i), tris);
+      hits += ref.valid();
+      const bool same = ref.prim == got.prim[i] && got.inst[i] == kInvalidId &&
+                        (ref.valid() ? ref.t == got.t[i] && ref.u == got.u[i] && ref.v == got.v[i]
+                                     : got.t[i] == rays.tmax[i]);
+      if (!same && ++wrong <= 5) {
+        ADD_FAILURE() << what << ": packet " << k << " lane " << i << " brute force prim " << ref.prim << " t " << ref.t
+                      << ", packet prim " << got.prim[i] << " t " << got.t[i];
+      }
+    }
+  }
+  EXPECT_EQ(wrong, 0u) << what;
+  EXPECT_GT(hits, lanes / 10) << what << ": the test rays should hit something";
+  EXPECT_LT(hits, lanes) << what << ": and miss sometimes";
+  if (simd_level() == SimdLevel::kAvx512) {
+    EXPECT_GT(frustums, 0u) << what << ": frustums traced";
+  }
+}
+
+/// Camera-like packets, fine and coarse, from one origin and from spread ones, with partial masks,
+/// segments, lanes in several direction octants (several frustums a packet), and the lanes the
+/// frustum must leave to single rays (a direction component of zero, tmin < 0); aimed at random
+/// points and at the adversarial scene's vertices and edges, whose exact rays join the packets.
+std::vector<std::pair<RayPacket, LaneMask>> test_packets(std::mt19937& rng, const std::vector<Triangle>& tris,
+                                                         size_t count) {
+  std::vector<std::pair<RayPacket, LaneMask>> packets;
+  std::uniform_int_distribution<uint32_t> any_mask(1u, kAllLanes);
+  for (size_t k = 0; k < count; ++k) {
+    const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+    const Triangle& aim = tris[rng() % tris.size()];
+    const glm::vec3 target =
+        k % 3 == 0 ? test::random_point(rng, 0.0f, 10.0f) : (k % 3 == 1 ? aim.v0 : 0.5f * (aim.v1 + aim.v2));
+    const float pitch = std::array<float, 4>{1e-4f, 2e-3f, 0.03f, 0.4f}[k % 4];  // 0.4: the lanes span octants
+    const float spread = std::array<float, 3>{0.0f, 1e-3f, 0.3f}[k % 3];
+    RayPacket p = camera_packet(rng, o, target - o, pitch, spread);
+    const int exact = static_cast<int>(rng() % kPacketSize);
+    p.set(exact, Ray{o, target - o});  // exactly through the vertex or edge
+    LaneMask mask = kAllLanes;
+    switch (k % 8) {
+      case 7: mask = 1u << exact; break;  // alone: the frustum is that ray, its slack all that is left
+      case 1: mask = any_mask(rng); break;
+      case 2: mask = 0x00ffu; break;  // one half only: not a frustum
+      case 3: mask = 1u << (rng() % kPacketSize); break;
+      case 4: p.dir[rng() % 3][rng() % kPacketSize] = 0.0f; break;  // an infinite inverse direction
+      case 5: {  // a segment reaching behind its origin
+        const int i = static_cast<int>(rng() % kPacketSize);
+        p.org[0][i] += 3.0f * p.dir[0][i];
+        p.org[1][i] += 3.0f * p.dir[1][i];
+        p.org[2][i] += 3.0f * p.dir[2][i];
+        p.tmin[i] = -3.0f;
+        break;
+      }
+      case 6:  // segments, some starting past their origin
+        for (int i = 0; i < kPacketSize; ++i) {
+          p.tmin[i] = (i % 3 == 0) ? 0.5f : 0.0f;
+          p.tmax[i] = 2.0f + static_cast<float>(i);
+        }
+        break;
+      default: break;
+    }
+    packets.emplace_back(p, mask);
+  }
+  return packets;
+}
+
+TEST(WideBvh, PacketsEqualBruteForceOnEveryInstructionSet) {
+  if (!simd_level_supported(SimdLevel::kAvx512))
+    std::cout << "[ note ] no AVX-512 on this CPU: packets go a ray at a time, the frustums are not tested\n";
+  std::mt19937 rng(21);
+  auto soup = test::random_soup(rng, 4000, 0.4f);
+  const auto sphere = test::closed_sphere({5, 5, 5}, 2.0f, 30);
+  soup.insert(soup.end(), sphere.begin(), sphere.end());
+  const auto adversarial = test::adversarial_scene();
+  const std::vector<Triangle>* scenes[] = {&soup, &adversarial};
+  for (const std::vector<Triangle>* tris : scenes) {
+    const auto packets = test_packets(rng, *tris, test::brute_force_rays(4000) / 16 + 40);
+    for (const uint32_t max_leaf : {1u, 8u, 32u}) {
+      WideBvhBuildOptions opt;
+      opt.max_leaf = max_leaf;
+      const WideBvh bvh(*tris, opt);
+      on_every_level([&](const std::string& level) {
+        expect_packets_equal_brute_force(bvh, *tris, packets,
+                                         std::string(tris == &soup ? "soup" : "adversarial") + ", max_leaf " +
+                                             std::to_string(max_leaf) + ", " + level);
+      });
+    }
+  }
+  std::vector<Triangle> slivers;
+  std::vector<Ray> sliver_rays;
+  test::sliver_scene(slivers, sliver_rays);
+  for (int i = 0; i < 48; ++i) {  // above it all, going up
+    sliver_rays.push_back(Ray{{1.0f + 0.04f * i, 3.0f, 0.5f}, {0.1f, 1.0f, 0.0f}});
+  }
+  // as the scene lists them (neighbours), shuffled, and each ray alone (a frustum of one ray is
+  // that ray: the slack on its far ends is what keeps the hits that lie on a box's far face)
+  std::vector<std::pair<RayPacket, LaneMask>> packets;
+  std::vector<Ray> shuffled = sliver_rays;
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  for (const std::vector<Ray>* list : {&sliver_rays, &shuffled}) {
+    for (size_t i = 0; i + kPacketSize <= list->size(); i += kPacketSize) {
+      RayPacket p;
+      for (int j = 0; j < kPacketSize; ++j) p.set(j, (*list)[i + j]);
+      packets.emplace_back(p, kAllLanes);
+      if (list == &sliver_rays) {
+        for (int j = 0; j < kPacketSize; ++j) packets.emplace_back(p, 1u << j);
+      }
+    }
+  }
+  const WideBvh bvh(slivers);
+  on_every_level([&](const std::string& level) { expect_packets_equal_brute_force(bvh, slivers, packets, "slivers, " + level); });
+  const WideBvh none(std::vector<Triangle>{});
+  HitPacket h;
+  none.intersect(packets[0].first, kAllLanes, h);
+  for (int i = 0; i < kPacketSize; ++i) EXPECT_EQ(h.prim[i], kInvalidId);
 }
 
 /// The same Hit as the kd-tree, bit for bit, on every ray: either structure may serve a ray.
