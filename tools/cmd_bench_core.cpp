@@ -284,41 +284,9 @@ void run(const Options& opt) {
   secondary_rays(tree, primary, hits, lights, shadow, bounce);
 
   std::vector<HitPacket> scratch(primary.packets.size());
-  auto mrays = [](size_t rays, double ms) { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; };
-  auto pass = [&](const Workload& w, size_t w_per_tile, auto fn) {  // w_per_tile: this workload's packets a tile
-    return tile_pass(arena, tiles, w.packets.size(), w_per_tile, fn);
-  };
-  auto single_rays = [&](const Workload& w) {
-    return pass(w, per_tile, [&, &w = w](size_t p) {
-      for (int i = 0; i < kPacketSize; ++i) {
-        if ((w.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(w.packets[p].get(i)).prim;
-      }
-    });
-  };
-  const double single_ms = median_ms(opt.runs, single_rays(primary));
-  const auto packet_pass =
-      pass(primary, per_tile, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
-  const double packet_ms = median_ms(opt.runs, packet_pass);
-  const size_t per_tile_shadow = per_tile * std::max<size_t>(1, lights.size());
-  std::vector<LaneMask> blocked(shadow.packets.size());
-  const auto shadow_pass =
-      pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
-  const double shadow_ms = median_ms(opt.runs, shadow_pass);
-  // the same packets with a last-occluder hint per light and tile, as the renderer traces them
-  auto hinted_pass = [&] {
-    parallel_tiles(arena, tiles, [&](size_t t) {
-      std::vector<core::ShadowHint> hints(std::max<size_t>(1, lights.size()));
-      for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
-        const LaneMask b = tree.occluded(shadow.packets[p], shadow.masks[p], &hints[p % hints.size()]);
-        if (b != blocked[p]) throw std::logic_error("bench-core: a shadow hint changed an answer");
-      }
-    });
-  };
-  const double hinted_ms = median_ms(opt.runs, hinted_pass);
-  const double bounce_ms = median_ms(opt.runs, single_rays(bounce));
-
-  // The wide BVH for single and incoherent rays: built over the same triangles, checked to give
-  // the kd-tree's hits bit for bit on every primary and bounce ray, then timed.
+  // The wide BVH for single and incoherent rays, and coherent packets where it traces them as
+  // frustums: built over the same triangles, checked to give the kd-tree's hits bit for bit on
+  // every primary and bounce ray, single and (primary) in packets, then timed.
   core::WideBvh wide;
   const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris); }); });
   const core::WideBvhStats wst = wide.stats();
@@ -342,8 +310,61 @@ void run(const Options& opt) {
       }
     }
   }
+  for (size_t p = 0; p < primary.packets.size(); ++p) {
+    wide.intersect(primary.packets[p], primary.masks[p], scratch[p]);
+    for (int i = 0; i < kPacketSize; ++i) {
+      if (!((primary.masks[p] >> i) & 1u)) continue;
+      const HitPacket& a = hits[p];
+      const HitPacket& b = scratch[p];
+      if (a.prim[i] != b.prim[i] || a.t[i] != b.t[i] || a.u[i] != b.u[i] || a.v[i] != b.v[i]) {
+        if (wide_mismatch++ == 0) std::fprintf(stderr, "bench-core: a wide BVH packet's lane %d differs from the kd-tree's hit\n", i);
+      }
+    }
+  }
   out["verify"]["wide_bvh_vs_kdtree_mismatches"] = wide_mismatch;
   if (wide_mismatch) throw std::runtime_error("verification failed: " + std::to_string(wide_mismatch) + " wide BVH hits differ from the kd-tree's");
+  auto mrays = [](size_t rays, double ms) { return ms > 0.0 ? rays / (ms * 1e3) : 0.0; };
+  auto pass = [&](const Workload& w, size_t w_per_tile, auto fn) {  // w_per_tile: this workload's packets a tile
+    return tile_pass(arena, tiles, w.packets.size(), w_per_tile, fn);
+  };
+  auto single_rays = [&](const Workload& w) {
+    return pass(w, per_tile, [&, &w = w](size_t p) {
+      for (int i = 0; i < kPacketSize; ++i) {
+        if ((w.masks[p] >> i) & 1u) scratch[p].prim[i] = tree.intersect(w.packets[p].get(i)).prim;
+      }
+    });
+  };
+  const double single_ms = median_ms(opt.runs, single_rays(primary));
+  // camera packets as TwoLevelScene traces them: frustums through the wide BVH where its kernels
+  // trace them (WideBvh::traces_frustums), the kd-tree's packets elsewhere; and the kd-tree's alone
+  const auto packet_pass = pass(primary, per_tile, [&](size_t p) {
+    if (core::WideBvh::traces_frustums(primary.masks[p]))
+      wide.intersect(primary.packets[p], primary.masks[p], scratch[p]);
+    else
+      tree.intersect(primary.packets[p], primary.masks[p], scratch[p]);
+  });
+  const double packet_ms = median_ms(opt.runs, packet_pass);
+  const auto kd_packet_pass =
+      pass(primary, per_tile, [&](size_t p) { tree.intersect(primary.packets[p], primary.masks[p], scratch[p]); });
+  const double kd_packet_ms = median_ms(opt.runs, kd_packet_pass);
+  const size_t per_tile_shadow = per_tile * std::max<size_t>(1, lights.size());
+  std::vector<LaneMask> blocked(shadow.packets.size());
+  const auto shadow_pass =
+      pass(shadow, per_tile_shadow, [&](size_t p) { blocked[p] = tree.occluded(shadow.packets[p], shadow.masks[p]); });
+  const double shadow_ms = median_ms(opt.runs, shadow_pass);
+  // the same packets with a last-occluder hint per light and tile, as the renderer traces them
+  auto hinted_pass = [&] {
+    parallel_tiles(arena, tiles, [&](size_t t) {
+      std::vector<core::ShadowHint> hints(std::max<size_t>(1, lights.size()));
+      for (size_t p = t * per_tile_shadow; p < std::min(shadow.packets.size(), (t + 1) * per_tile_shadow); ++p) {
+        const LaneMask b = tree.occluded(shadow.packets[p], shadow.masks[p], &hints[p % hints.size()]);
+        if (b != blocked[p]) throw std::logic_error("bench-core: a shadow hint changed an answer");
+      }
+    });
+  };
+  const double hinted_ms = median_ms(opt.runs, hinted_pass);
+  const double bounce_ms = median_ms(opt.runs, single_rays(bounce));
+
   auto wide_rays = [&](const Workload& w) {
     return pass(w, per_tile, [&, &w = w](size_t p) {
       for (int i = 0; i < kPacketSize; ++i) {
@@ -361,6 +382,7 @@ void run(const Options& opt) {
   out["rays"] = {{"primary_single", mrays(primary.rays, wide_single_ms)},
                  {"primary_single_kdtree", mrays(primary.rays, single_ms)},
                  {"primary_packet", mrays(primary.rays, packet_ms)},
+                 {"primary_packet_kdtree", mrays(primary.rays, kd_packet_ms)},
                  {"shadow", mrays(shadow.rays, shadow_ms)},
                  {"shadow_hinted", mrays(shadow.rays, hinted_ms)},
                  {"incoherent", mrays(bounce.rays, wide_bounce_ms)},
@@ -487,6 +509,7 @@ void run(const Options& opt) {
         {"primary_single", paired_ratio(opt.runs, wide_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
         {"primary_single_kdtree", paired_ratio(opt.runs, single_rays(primary), [&] { single_batch.restore(); }, embree_single_pass)},
         {"primary_packet", paired_ratio(opt.runs, packet_pass, [&] { best_batch->restore(); }, embree_packet_pass)},
+        {"primary_packet_kdtree", paired_ratio(opt.runs, kd_packet_pass, [&] { best_batch->restore(); }, embree_packet_pass)},
         {"shadow", paired_ratio(opt.runs, shadow_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
         {"shadow_hinted", paired_ratio(opt.runs, hinted_pass, [&] { shadow_batch.restore(); }, embree_shadow_pass)},
         {"incoherent", paired_ratio(opt.runs, wide_rays(bounce), [&] { bounce_batch.restore(); }, embree_bounce_pass)},
@@ -506,7 +529,7 @@ void run(const Options& opt) {
   std::printf("  wide BVH build %.1f ms, %u nodes, %u leaves (%u blocks of 8 for %u triangles), depth %u, SAH cost %.2f\n",
               wide_build_ms, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
   std::printf("  %-22s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
-  for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "shadow", "shadow_hinted", "incoherent",
+  for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "primary_packet_kdtree", "shadow", "shadow_hinted", "incoherent",
                           "incoherent_kdtree", "incoherent_kdtree_packets"}) {
     std::printf("  %-22s %12.2f", key, out["rays"][key].get<double>());
     if (out.contains("embree") && out["embree"]["rays"].contains(key)) {
@@ -534,9 +557,10 @@ void run(const Options& opt) {
         r["shadow_coherent_flag"].get<double>(), quality("shadow_coherent_flag").c_str(),
         quality("primary_packet").c_str(), quality("shadow").c_str());
     std::printf("  speed ratio artrace / embree's best, runs in turns (median of %d pairs, order alternating): primary_single %.3f "
-                "(kd-tree %.3f), primary_packet %.3f, shadow %.3f, shadow_hinted %.3f, incoherent %.3f (kd-tree %.3f)\n",
+                "(kd-tree %.3f), primary_packet %.3f (kd-tree %.3f), shadow %.3f, shadow_hinted %.3f, incoherent %.3f (kd-tree %.3f)\n",
                 opt.runs, e["paired_ratio"]["primary_single"].get<double>(), e["paired_ratio"]["primary_single_kdtree"].get<double>(),
-                e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["shadow"].get<double>(),
+                e["paired_ratio"]["primary_packet"].get<double>(), e["paired_ratio"]["primary_packet_kdtree"].get<double>(),
+                e["paired_ratio"]["shadow"].get<double>(),
                 e["paired_ratio"]["shadow_hinted"].get<double>(), e["paired_ratio"]["incoherent"].get<double>(),
                 e["paired_ratio"]["incoherent_kdtree"].get<double>());
     const nlohmann::json& wrong = e["shadow_disagreeing_lanes_wrong"];

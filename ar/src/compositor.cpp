@@ -361,7 +361,7 @@ struct Shader {
         const core::LaneMask mask = (1u << n) - 1u;
         for (int i = 0; i < n; ++i) rays.set(i, core::Ray{list[at + i].org, list[at + i].dir});
         for (int i = 0; i < core::kPacketSize; ++i) hits.prim[i] = core::kInvalidId;
-        scene.intersect(rays, mask, hits);
+        scene.intersect(rays, mask, hits, core::Coherence::kIncoherent);
         const core::LaneMask real_hits = proxy ? proxy->intersect(rays, mask, t_real, real) : 0u;
         for (int i = 0; i < n; ++i) {
           const Deferred::Secondary& s = list[at + i];

@@ -431,11 +431,15 @@ inline void mark_static(LaneMask mask, HitPacket& hits) {
 
 }  // namespace
 
-void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const {
+void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits, Coherence coherence) const {
   require_committed(dirty_);
   mask &= kAllLanes;
   if (config_ == Config::kKdTreeBvh) {
-    kd_.intersect(rays, mask, hits);
+    if (coherence == Coherence::kCoherent && !wide_.empty() && WideBvh::traces_frustums(mask)) {
+      wide_.intersect(rays, mask, hits);
+    } else {
+      kd_.intersect(rays, mask, hits);
+    }
     mark_static(mask, hits);
   } else {
     for (int i = 0; i < kPacketSize; ++i) {

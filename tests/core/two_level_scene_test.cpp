@@ -249,17 +249,23 @@ TEST(TwoLevelScene, PacketsEqualSingleRays) {
       for (int i = 0; i < kPacketSize; ++i) {
         packet.set(i, Ray{o, p % 2 ? test::random_direction(rng) : glm::normalize(base + 0.05f * test::random_direction(rng))});
       }
-      HitPacket hits;
-      scene.intersect(packet, kAllLanes, hits);
       const LaneMask blocked = scene.occluded(packet, kAllLanes);
-      for (int i = 0; i < kPacketSize; ++i) {
-        const Hit h = scene.intersect(packet.get(i));
-        ASSERT_EQ(hits.prim[i], h.prim) << to_string(level);
-        ASSERT_EQ(hits.inst[i], h.inst);
-        if (h.valid()) {
-          ASSERT_EQ(hits.t[i], h.t);
+      // coherent packets take the wide BVH's frustums where the kernels trace them, incoherent
+      // ones the kd-tree's packets: the same hits either way
+      for (const Coherence coherence : {Coherence::kCoherent, Coherence::kIncoherent}) {
+        HitPacket hits;
+        scene.intersect(packet, kAllLanes, hits, coherence);
+        for (int i = 0; i < kPacketSize; ++i) {
+          const Hit h = scene.intersect(packet.get(i));
+          ASSERT_EQ(hits.prim[i], h.prim) << to_string(level);
+          ASSERT_EQ(hits.inst[i], h.inst);
+          if (h.valid()) {
+            ASSERT_EQ(hits.t[i], h.t);
+            ASSERT_EQ(hits.u[i], h.u);
+            ASSERT_EQ(hits.v[i], h.v);
+          }
+          ASSERT_EQ(((blocked >> i) & 1u) != 0, h.valid());
         }
-        ASSERT_EQ(((blocked >> i) & 1u) != 0, h.valid());
       }
     }
   }

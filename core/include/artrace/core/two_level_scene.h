@@ -88,6 +88,11 @@ struct DeformableHandle {
   uint32_t generation = 0;
 };
 
+/// What a packet's rays are like, as the flags of Embree's intersect context: neighbouring
+/// pixels' camera rays are coherent; reflection and refraction rays gathered from many pixels are
+/// not. It chooses how a packet is traced, never what it hits.
+enum class Coherence { kCoherent, kIncoherent };
+
 class TwoLevelScene {
  public:
   enum class Config { kBvh, kKdTreeBvh };
@@ -98,7 +103,9 @@ class TwoLevelScene {
   /// The geometry that never moves (kd-tree or lazy BVH, by configuration). With the kd-tree,
   /// `single_ray_bvh` also builds a WideBvh over it, which serves the single-ray queries
   /// (reflection and refraction rays are incoherent: it traces them about twice as fast as the
-  /// kd-tree, bench-core); packets keep the kd-tree. Hits are the same either way, to the bit.
+  /// kd-tree, bench-core) and, where it traces them as frustums (WideBvh::traces_frustums),
+  /// coherent packets' closest hits; other packets keep the kd-tree. Hits are the same either
+  /// way, to the bit.
   void set_static(std::vector<Triangle> tris, bool single_ray_bvh = true);
   /// A rigid mesh in object space; its BVH is built lazily and shared by its instances.
   MeshHandle add_rigid_mesh(std::vector<Triangle> object_space);
@@ -118,8 +125,10 @@ class TwoLevelScene {
   /// `deformable_object_id(handle)`.
   Hit intersect(const Ray& ray) const;
   bool occluded(const Ray& ray) const;
-  /// Closest hits of the lanes in `mask`; the other lanes of `hits` keep what they hold.
-  void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
+  /// Closest hits of the lanes in `mask`; the other lanes of `hits` keep what they hold. Packets
+  /// are coherent unless said otherwise (see Coherence); the answer does not depend on it.
+  void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits,
+                 Coherence coherence = Coherence::kCoherent) const;
   /// `hint` (optional, see ShadowHint) serves the static kd-tree of the kdtree+bvh configuration.
   LaneMask occluded(const RayPacket& rays, LaneMask mask, ShadowHint* hint = nullptr) const;
 
