@@ -169,7 +169,7 @@ void expect_packets_equal_brute_force(const WideBvh& bvh, const std::vector<Tria
       hits += ref.valid();
       const bool same = ref.prim == got.prim[i] && got.inst[i] == kInvalidId &&
                         (ref.valid() ? ref.t == got.t[i] && ref.u == got.u[i] && ref.v == got.v[i]
-                                     : got.t[i] == rays.tmax[i]);
+                                     : (got.t[i] == rays.tmax[i] || (std::isnan(got.t[i]) && std::isnan(rays.tmax[i]))));
       if (!same && ++wrong <= 5) {
         ADD_FAILURE() << what << ": packet " << k << " lane " << i << " brute force prim " << ref.prim << " t " << ref.t
                       << ", packet prim " << got.prim[i] << " t " << got.t[i];
@@ -217,11 +217,12 @@ std::vector<std::pair<RayPacket, LaneMask>> test_packets(std::mt19937& rng, cons
         p.tmin[i] = -3.0f;
         break;
       }
-      case 6:  // segments, some starting past their origin
+      case 6:  // segments, some starting past their origin, one lane's end NaN (it hits nothing)
         for (int i = 0; i < kPacketSize; ++i) {
           p.tmin[i] = (i % 3 == 0) ? 0.5f : 0.0f;
           p.tmax[i] = 2.0f + static_cast<float>(i);
         }
+        if (k % 16 == 14) p.tmax[rng() % kPacketSize] = std::numeric_limits<float>::quiet_NaN();
         break;
       default: break;
     }

@@ -270,6 +270,12 @@ TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
         << "lanes " << lanes;
     for (const char* key : {"primary_single", "primary_packet_4", "primary_packet_8", "primary_packet_16", "shadow", "incoherent"})
       EXPECT_GT(e.at("rays").at(key).get<double>(), 0.0) << key;
+    // ours: camera packets as the two-level scene traces them, and the kd-tree's alone, each
+    // checked against the kd-tree's hits (wide BVH packets included) before timing
+    EXPECT_GT(out.at("rays").at("primary_packet").get<double>(), 0.0);
+    EXPECT_GT(out.at("rays").at("primary_packet_kdtree").get<double>(), 0.0);
+    EXPECT_GT(e.at("paired_ratio").at("primary_packet_kdtree").get<double>(), 0.0);
+    EXPECT_EQ(out.at("verify").at("wide_bvh_vs_kdtree_mismatches").get<size_t>(), 0u);
     // every kind of ray through both of Embree's BVHs, the faster one's rate the one compared
     EXPECT_GT(e.at("build_ms").get<double>(), 0.0);
     EXPECT_GT(e.at("build_ms_medium").get<double>(), 0.0);
