@@ -335,10 +335,10 @@ void run(const Options& opt) {
     });
   };
   const double single_ms = median_ms(opt.runs, single_rays(primary));
-  // camera packets as TwoLevelScene traces them: frustums through the wide BVH where its kernels
-  // trace them (WideBvh::traces_frustums), the kd-tree's packets elsewhere; and the kd-tree's alone
+  // camera packets as TwoLevelScene traces them: frustums through the wide BVH where they
+  // pay (WideBvh::frustums_pay), the kd-tree's packets elsewhere; and the kd-tree's alone
   const auto packet_pass = pass(primary, per_tile, [&](size_t p) {
-    if (core::WideBvh::traces_frustums(primary.masks[p]))
+    if (core::WideBvh::frustums_pay(primary.masks[p]))
       wide.intersect(primary.packets[p], primary.masks[p], scratch[p]);
     else
       tree.intersect(primary.packets[p], primary.masks[p], scratch[p]);

@@ -435,7 +435,7 @@ void TwoLevelScene::intersect(const RayPacket& rays, LaneMask mask, HitPacket& h
   require_committed(dirty_);
   mask &= kAllLanes;
   if (config_ == Config::kKdTreeBvh) {
-    if (coherence == Coherence::kCoherent && !wide_.empty() && WideBvh::traces_frustums(mask)) {
+    if (coherence == Coherence::kCoherent && !wide_.empty() && WideBvh::frustums_pay(mask)) {
       wide_.intersect(rays, mask, hits);
     } else {
       kd_.intersect(rays, mask, hits);

@@ -345,7 +345,7 @@ void WideBvh::intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) c
   }
 }
 
-bool WideBvh::traces_frustums(LaneMask mask) {
+bool WideBvh::frustums_pay(LaneMask mask) {
   mask &= kAllLanes;
   return single_ray_kernels().intersect_packet != nullptr && (mask & 0xffu) != 0 && (mask >> 8) != 0;
 }

@@ -103,7 +103,7 @@ class TwoLevelScene {
   /// The geometry that never moves (kd-tree or lazy BVH, by configuration). With the kd-tree,
   /// `single_ray_bvh` also builds a WideBvh over it, which serves the single-ray queries
   /// (reflection and refraction rays are incoherent: it traces them about twice as fast as the
-  /// kd-tree, bench-core) and, where it traces them as frustums (WideBvh::traces_frustums),
+  /// kd-tree, bench-core) and, where its frustums pay (WideBvh::frustums_pay),
   /// coherent packets' closest hits; other packets keep the kd-tree. Hits are the same either
   /// way, to the bit.
   void set_static(std::vector<Triangle> tris, bool single_ray_bvh = true);

@@ -107,11 +107,12 @@ class WideBvh {
   /// for all of them, and each leaf's triangles are tested against the lanes that reach its box.
   /// Otherwise a ray at a time.
   void intersect(const RayPacket& rays, LaneMask mask, HitPacket& hits) const;
-  /// Whether intersect(rays, mask, ...) traces frustums, and so beats the kd-tree's packets on
-  /// camera rays: with the AVX-512 kernels, and lanes in both halves of the packet. (Frustums of
-  /// 8 rays lost to the kd-tree: with the AVX2 kernels 0.76-0.87x its speed on the kitchen, about
-  /// 0.5x on the robots; 8-ray packets through the AVX-512 kernel likewise.)
-  static bool traces_frustums(LaneMask mask);
+  /// Whether intersect(rays, mask, ...)'s frustums beat the kd-tree's packets on camera rays: with
+  /// the AVX-512 kernels, and lanes in both halves of the packet. (intersect traces frustums
+  /// whenever the kernels have them, whatever the mask. Frustums of 8 rays lost to the kd-tree:
+  /// with the AVX2 kernels 0.76-0.87x its speed on the kitchen, about 0.5x on the robots; 8-ray
+  /// packets through the AVX-512 kernel likewise.)
+  static bool frustums_pay(LaneMask mask);
 
   bool empty() const { return root_ == WideNode::kEmpty; }
   WideBvhView view() const { return {nodes_.data(), blocks_.data(), root_}; }
