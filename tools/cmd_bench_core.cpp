@@ -215,6 +215,7 @@ struct Options {
   int width = 512, height = 400, threads = 0, runs = 7, subdivide = 0, verify_rays = 1000;
   int lanes = 8;  ///< rays a packet: 8 (4x2 pixels, against Embree's 8-wide calls) or 16 (4x4, its 16-wide ones)
   core::KdTreeBuildOptions build;
+  core::WideBvhBuildOptions wide;
 };
 
 void run(const Options& opt) {
@@ -288,9 +289,9 @@ void run(const Options& opt) {
   // frustums: built over the same triangles, checked to give the kd-tree's hits bit for bit on
   // every primary and bounce ray, single and (primary) in packets, then timed.
   core::WideBvh wide;
-  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris); }); });
-  const core::WideBvhStats wst = wide.stats();
-  out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
+  const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris, opt.wide); }); });
+  const core::WideBvhStats wst = wide.stats(opt.wide);
+  out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"spatial_budget", opt.wide.spatial_budget}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
                      {"triangles_in_blocks", wst.triangles_in_blocks}, {"max_depth", wst.max_depth}, {"sah_cost", wst.sah_cost}};
   size_t wide_mismatch = 0;
   for (const Workload* w : {&primary, &bounce}) {
@@ -526,8 +527,8 @@ void run(const Options& opt) {
               opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
               st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
-  std::printf("  wide BVH build %.1f ms, %u nodes, %u leaves (%u blocks of 8 for %u triangles), depth %u, SAH cost %.2f\n",
-              wide_build_ms, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
+  std::printf("  wide BVH build %.1f ms (spatial splits: budget %g), %u nodes, %u leaves (%u blocks of 8 for %u triangle references), depth %u, SAH cost %.2f\n",
+              wide_build_ms, opt.wide.spatial_budget, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
   std::printf("  %-22s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
   for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "primary_packet_kdtree", "shadow", "shadow_hinted", "incoherent",
                           "incoherent_kdtree", "incoherent_kdtree_packets"}) {
@@ -593,6 +594,10 @@ void add_bench_core_command(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--json", opt->json, "write the results as JSON");
+  cmd->add_option("--wide-spatial", opt->wide.spatial_budget,
+                  "the wide BVH's spatial splits: references they may add per triangle (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0f, 1.0f));
   cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str()->check(finite_range(0, 1));

@@ -1,5 +1,7 @@
-// Build of the 8-wide BVH (see wide_bvh.h): binned SAH, binary splits gathered into wide nodes.
+// Build of the 8-wide BVH (see wide_bvh.h): binned SAH, binary splits (object splits, and
+// optionally spatial ones) gathered into wide nodes.
 #include "artrace/core/wide_bvh.h"
+#include "clipping.h"
 #include "fork_join.h"
 #include "kernels.h"
 
@@ -23,15 +25,31 @@ uint32_t blocks_for(uint32_t n) { return (n + kBlockLanes - 1u) / kBlockLanes; }
 
 /// Wide levels split by the SAH; below, ranges are halved (see Builder::split). Each wide level
 /// leaves at most seven entries on the traversal's stack: 7 (kSahDepth + 11) < kWideStack for
-/// 2^28 triangles.
+/// 2^28 triangles (2^29 references with the most that spatial splits may add).
 constexpr uint32_t kSahDepth = 24;
 
-/// A range of the primitive index array with its box and its centroids' box.
-struct Range {
-  uint32_t begin = 0, end = 0;
-  Aabb box, centroids;
-  uint32_t size() const { return end - begin; }
+/// A reference to a triangle: the triangle, or after spatial splits the part of it in `box`.
+struct Ref {
+  Aabb box;
+  uint32_t prim;
 };
+
+/// The references below a node, their box and their centroids' box, and how many references
+/// spatial splits may still add below it.
+struct Range {
+  std::vector<Ref> refs;
+  Aabb box, centroids;
+  uint32_t budget = 0;
+  uint32_t size() const { return static_cast<uint32_t>(refs.size()); }
+};
+
+/// Spatial splits are tried where the best object split's children overlap by more than this
+/// part of the root's surface area (Stich, Friedrich & Dietrich, "Spatial Splits in Bounding
+/// Volume Hierarchies", High Performance Graphics 2009).
+constexpr float kSpatialOverlap = 1e-4f;
+
+/// Ranges of at least this many references bin their axes as parallel tasks.
+constexpr uint32_t kParallelBinning = 4096;
 
 /// A subtree built on its own: node and block indices are local until it is joined.
 struct Sub {
@@ -44,114 +62,315 @@ class Builder {
   Builder(const std::vector<Triangle>& tris, const WideBvhBuildOptions& opt) : tris_(tris), opt_(opt) {
     if (opt_.bins < 2 || opt_.bins > 256) throw std::invalid_argument("wide BVH: bins must be in 2..256");
     if (opt_.max_leaf < 1 || opt_.max_leaf > 32) throw std::invalid_argument("wide BVH: max_leaf must be in 1..32");
+    if (!(opt_.spatial_budget >= 0.0f && opt_.spatial_budget <= 1.0f))
+      throw std::invalid_argument("wide BVH: spatial_budget must be in 0..1");
     if (tris.size() >= (1u << 28)) throw std::length_error("wide BVH: more than 2^28 triangles");
-    box_.resize(tris.size());
     for (uint32_t i = 0; i < tris.size(); ++i) {
       if (!finite(tris[i])) continue;  // never hit (the watertight test rejects them)
-      box_[i] = Aabb::of(tris[i]);
-      prims_.push_back(i);
+      all_.refs.push_back(Ref{Aabb::of(tris[i]), i});
     }
   }
 
   /// Builds into `out`; returns the root reference.
   uint32_t build(Sub& out) {
-    if (prims_.empty()) return WideNode::kEmpty;
-    Range all{0, static_cast<uint32_t>(prims_.size()), {}, {}};
-    bounds(all);
-    return subtree(all, out);
+    if (all_.refs.empty()) return WideNode::kEmpty;
+    all_.budget = static_cast<uint32_t>(opt_.spatial_budget * static_cast<float>(all_.size()));
+    bounds(all_);
+    root_area_ = all_.box.surface_area();
+    return subtree(std::move(all_), out);
   }
 
  private:
-  glm::vec3 centroid(uint32_t prim) const { return 0.5f * (box_[prim].lo + box_[prim].hi); }
+  static glm::vec3 centroid(const Ref& r) { return 0.5f * (r.box.lo + r.box.hi); }
 
-  void bounds(Range& r) const {
+  static void bounds(Range& r) {
     r.box = Aabb{};
     r.centroids = Aabb{};
-    for (uint32_t i = r.begin; i < r.end; ++i) {
-      r.box.extend(box_[prims_[i]]);
-      r.centroids.extend(centroid(prims_[i]));
+    for (const Ref& ref : r.refs) {
+      r.box.extend(ref.box);
+      r.centroids.extend(centroid(ref));
     }
   }
 
   float leaf_cost(uint32_t n) const { return opt_.block_cost * static_cast<float>(blocks_for(n)); }
 
-  /// The best binary split of `r` by the SAH, in place; false when a leaf is cheaper (and allowed).
-  bool split(const Range& r, Range& left, Range& right, uint32_t depth) {
-    const uint32_t n = r.size();
-    if (n <= kBlockLanes / 2) return false;  // half a block: no split beats testing it
-    if (depth >= kSahDepth) {
-      // past this depth (inputs that defeat the SAH, e.g. sizes in geometric progression) the
-      // ranges are halved, which bounds the depth and with it the traversal's stack
-      left = Range{r.begin, r.begin + n / 2, {}, {}};
-      right = Range{r.begin + n / 2, r.end, {}, {}};
-      bounds(left);
-      bounds(right);
-      return true;
-    }
+  /// `r`'s references split into `left` and `right` (their bounds not yet set), whose budgets
+  /// share what is left of r's in proportion to their sizes.
+  static void hand_down(Range& r, std::vector<Ref>&& left_refs, std::vector<Ref>&& right_refs, uint32_t used,
+                        Range& left, Range& right) {
+    const uint64_t rest = r.budget - used;
+    const uint64_t nl = left_refs.size(), nr = right_refs.size();
+    left = Range{std::move(left_refs), {}, {}, static_cast<uint32_t>(rest * nl / (nl + nr))};
+    right = Range{std::move(right_refs), {}, {}, 0};
+    right.budget = static_cast<uint32_t>(rest) - left.budget;
+    std::vector<Ref>().swap(r.refs);  // freed, not kept while the subtrees below are built
+  }
+
+  /// The best binary split found on one axis: its cost (area times leaf cost, summed over the two
+  /// sides), the bin it starts, the two sides' boxes and reference counts.
+  struct AxisSplit {
+    float cost = kInfinity;
+    int bin = 0;
+    Aabb left, right;
+    uint32_t nl = 0, nr = 0;
+  };
+
+  /// The best object split of `r` on axis a: references binned by their boxes' centroids.
+  AxisSplit object_split(const Range& r, int a) const {
+    AxisSplit best;
     const int bins = opt_.bins;
-    const float area = r.box.surface_area();
-    float best_cost = kInfinity;
-    int best_axis = -1, best_bin = 0;
+    const float lo = r.centroids.lo[a], extent = r.centroids.hi[a] - lo;
+    if (!(extent > 0.0f)) return best;
+    const float scale = static_cast<float>(bins) / extent;
     struct Bin {  // trivial: only the first `bins` are set, not all 256 at every split
       glm::vec3 lo, hi;
       uint32_t count;
     };
     std::array<Bin, 256> bin;
-    std::array<float, 256> right_area;
+    for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0};
+    for (const Ref& ref : r.refs) {
+      const int b = bin_of(centroid(ref)[a], lo, scale, bins);
+      bin[b].lo = glm::min(bin[b].lo, ref.box.lo);
+      bin[b].hi = glm::max(bin[b].hi, ref.box.hi);
+      ++bin[b].count;
+    }
+    std::array<Aabb, 256> right_box;
     std::array<uint32_t, 256> right_count;
-    for (int a = 0; a < 3; ++a) {
-      const float lo = r.centroids.lo[a], extent = r.centroids.hi[a] - lo;
-      if (!(extent > 0.0f)) continue;
-      const float scale = static_cast<float>(bins) / extent;
-      for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0};
-      for (uint32_t i = r.begin; i < r.end; ++i) {
-        const uint32_t p = prims_[i];
-        const int b = bin_of(centroid(p)[a], lo, scale, bins);
-        bin[b].lo = glm::min(bin[b].lo, box_[p].lo);
-        bin[b].hi = glm::max(bin[b].hi, box_[p].hi);
-        ++bin[b].count;
+    Aabb acc;
+    uint32_t cnt = 0;
+    for (int b = bins - 1; b > 0; --b) {
+      acc.extend(Aabb{bin[b].lo, bin[b].hi});
+      cnt += bin[b].count;
+      right_box[b] = acc;
+      right_count[b] = cnt;
+    }
+    acc = Aabb{};
+    cnt = 0;
+    for (int b = 1; b < bins; ++b) {  // split between bins b - 1 and b
+      acc.extend(Aabb{bin[b - 1].lo, bin[b - 1].hi});
+      cnt += bin[b - 1].count;
+      if (cnt == 0 || right_count[b] == 0) continue;
+      const float cost = acc.surface_area() * leaf_cost(cnt) + right_box[b].surface_area() * leaf_cost(right_count[b]);
+      if (cost < best.cost) best = AxisSplit{cost, b, acc, right_box[b], cnt, right_count[b]};
+    }
+    return best;
+  }
+
+  /// The best spatial split of `r` on axis a (Stich et al.): equal bins over the node's box, a
+  /// reference counted on every bin it reaches, in the bins its box starts and ends in; no more
+  /// copies than r's budget allows.
+  AxisSplit spatial_split(const Range& r, int a) const {
+    AxisSplit best;
+    const int bins = opt_.bins;
+    const float lo = detail::coord(r.box.lo, a), extent = detail::coord(r.box.hi, a) - lo;
+    if (!(extent > 0.0f)) return best;
+    const float scale = static_cast<float>(bins) / extent;
+    struct Bin {
+      Aabb box;
+      uint32_t enter, exit;
+    };
+    std::array<Bin, 256> bin;
+    for (int b = 0; b < bins; ++b) bin[b] = Bin{Aabb{}, 0, 0};
+    for (const Ref& ref : r.refs) {
+      const int b0 = bin_of(detail::coord(ref.box.lo, a), lo, scale, bins);
+      const int b1 = bin_of(detail::coord(ref.box.hi, a), lo, scale, bins);
+      ++bin[b0].enter;
+      ++bin[b1].exit;
+      if (b0 == b1) {
+        bin[b0].box.extend(ref.box);
+        continue;
       }
-      Aabb acc;
-      uint32_t cnt = 0;
-      for (int b = bins - 1; b > 0; --b) {
-        acc.extend(Aabb{bin[b].lo, bin[b].hi});
-        cnt += bin[b].count;
-        right_area[b] = acc.surface_area();
-        right_count[b] = cnt;
-      }
-      acc = Aabb{};
-      cnt = 0;
-      for (int b = 1; b < bins; ++b) {  // split between bins b - 1 and b
-        acc.extend(Aabb{bin[b - 1].lo, bin[b - 1].hi});
-        cnt += bin[b - 1].count;
-        if (cnt == 0 || right_count[b] == 0) continue;
-        const float cost = acc.surface_area() * leaf_cost(cnt) + right_area[b] * leaf_cost(right_count[b]);
-        if (cost < best_cost) {
-          best_cost = cost;
-          best_axis = a;
-          best_bin = b;
+      // the triangle's part in each bin from where its edges cross the bin's planes: an estimate
+      // for the costs only (the partition clips exactly, see split)
+      const Triangle& t = tris_[ref.prim];
+      const glm::vec3 v[3] = {t.v0, t.v1, t.v2};
+      for (int b = b0; b <= b1; ++b) {
+        const float p0 = b == b0 ? -kInfinity : plane(lo, extent, b, bins);
+        const float p1 = b == b1 ? kInfinity : plane(lo, extent, b + 1, bins);
+        Aabb part;
+        for (int k = 0; k < 3; ++k) {
+          const glm::vec3& x = v[k];
+          const glm::vec3& y = v[k == 2 ? 0 : k + 1];
+          const float xa = detail::coord(x, a), ya = detail::coord(y, a);
+          if (xa >= p0 && xa <= p1) part.extend(x);
+          for (const float p : {p0, p1}) {
+            if ((xa < p && ya > p) || (xa > p && ya < p)) part.extend(x + (p - xa) / (ya - xa) * (y - x));
+          }
         }
+        bin[b].box.extend(detail::intersect_boxes(part, ref.box));
       }
     }
-    const float split_cost = area > 0.0f ? opt_.node_cost + best_cost / area : kInfinity;
-    if (n <= opt_.max_leaf && !(split_cost < leaf_cost(n))) return false;
-    uint32_t mid;
-    if (best_axis < 0) {
-      // every centroid in one point (or no area): halves in index order
-      mid = r.begin + n / 2;
-    } else {
-      const float lo = r.centroids.lo[best_axis];
-      const float scale = static_cast<float>(bins) / (r.centroids.hi[best_axis] - lo);
-      auto first = prims_.begin() + r.begin, last = prims_.begin() + r.end;
-      mid = static_cast<uint32_t>(std::stable_partition(first, last, [&](uint32_t p) {
-                                    return bin_of(centroid(p)[best_axis], lo, scale, bins) < best_bin;
-                                  }) - prims_.begin());
+    std::array<Aabb, 256> right_box;
+    std::array<uint32_t, 256> right_count;
+    Aabb acc;
+    uint32_t cnt = 0;
+    for (int b = bins - 1; b > 0; --b) {
+      acc.extend(bin[b].box);
+      cnt += bin[b].exit;
+      right_box[b] = acc;
+      right_count[b] = cnt;
     }
-    left = Range{r.begin, mid, {}, {}};
-    right = Range{mid, r.end, {}, {}};
+    acc = Aabb{};
+    cnt = 0;
+    for (int b = 1; b < bins; ++b) {  // split at the plane between bins b - 1 and b
+      acc.extend(bin[b - 1].box);
+      cnt += bin[b - 1].enter;
+      if (cnt == 0 || right_count[b] == 0) continue;
+      if (cnt + right_count[b] - r.size() > r.budget) continue;  // more copies than allowed
+      const float cost = acc.surface_area() * leaf_cost(cnt) + right_box[b].surface_area() * leaf_cost(right_count[b]);
+      if (cost < best.cost) best = AxisSplit{cost, b, acc, right_box[b], cnt, right_count[b]};
+    }
+    return best;
+  }
+
+  /// Plane b of `bins` equal bins over [lo, lo + extent].
+  static float plane(float lo, float extent, int b, int bins) {
+    return lo + extent * (static_cast<float>(b) / static_cast<float>(bins));
+  }
+
+  /// The parts of reference `ref` below and above `pos` on axis a.
+  void clip(const Ref& ref, int a, float pos, Aabb& below, Aabb& above) const {
+    Aabb box_below = ref.box, box_above = ref.box;
+    detail::set_coord(box_below.hi, a, std::min(pos, detail::coord(ref.box.hi, a)));
+    detail::set_coord(box_above.lo, a, std::max(pos, detail::coord(ref.box.lo, a)));
+    detail::clipped_bounds_split(tris_[ref.prim], box_below, box_above, a, pos, below, above);
+  }
+
+  /// `r`'s references on either side of the spatial split `s` on axis a; false when rounding left
+  /// a side empty (r untouched).
+  bool spatial_partition(Range& r, int a, const AxisSplit& s, Range& left, Range& right) const {
+    const int bins = opt_.bins;
+    const float lo = detail::coord(r.box.lo, a), extent = detail::coord(r.box.hi, a) - lo;
+    const float scale = static_cast<float>(bins) / extent;
+    const float pos = plane(lo, extent, s.bin, bins);
+    const float c_split = s.left.surface_area() * s.nl + s.right.surface_area() * s.nr;
+    std::vector<Ref> below, above;
+    uint32_t copies = 0;
+    for (const Ref& ref : r.refs) {
+      // by the bins of the box's ends, as the costs were counted
+      if (bin_of(detail::coord(ref.box.hi, a), lo, scale, bins) < s.bin) {
+        below.push_back(ref);
+        continue;
+      }
+      if (bin_of(detail::coord(ref.box.lo, a), lo, scale, bins) >= s.bin) {
+        above.push_back(ref);
+        continue;
+      }
+      Aabb b, t;
+      clip(ref, a, pos, b, t);
+      if (b.empty() || t.empty()) {  // a part that clipping leaves empty holds none of the triangle
+        if (!b.empty()) below.push_back(Ref{b, ref.prim});
+        if (!t.empty()) above.push_back(Ref{t, ref.prim});
+        continue;
+      }
+      // reference unsplitting (Stich et al.): the whole reference to one side where that costs less
+      Aabb whole_left = s.left, whole_right = s.right;
+      whole_left.extend(ref.box);
+      whole_right.extend(ref.box);
+      const float c_left = whole_left.surface_area() * s.nl + s.right.surface_area() * (s.nr - 1);
+      const float c_right = s.left.surface_area() * (s.nl - 1) + whole_right.surface_area() * s.nr;
+      if (c_left < c_split && c_left <= c_right) {
+        below.push_back(ref);
+      } else if (c_right < c_split) {
+        above.push_back(ref);
+      } else {
+        below.push_back(Ref{b, ref.prim});
+        above.push_back(Ref{t, ref.prim});
+        ++copies;
+      }
+    }
+    if (below.empty() || above.empty()) return false;
+    hand_down(r, std::move(below), std::move(above), copies, left, right);
     bounds(left);
     bounds(right);
     return true;
+  }
+
+  /// The best binary split of `r` by the SAH, its references moved into `left` and `right`; false
+  /// (r untouched) when a leaf is cheaper (and allowed).
+  bool split(Range& r, Range& left, Range& right, uint32_t depth) {
+    const uint32_t n = r.size();
+    if (n <= kBlockLanes / 2) return false;  // half a block: no split beats testing it
+    if (depth >= kSahDepth) {
+      // past this depth (inputs that defeat the SAH, e.g. sizes in geometric progression) the
+      // ranges are halved, which bounds the depth and with it the traversal's stack
+      halve(r, left, right);
+      return true;
+    }
+    // object splits on the three axes, then spatial ones where the budget allows and the best
+    // object split's sides overlap (Stich et al.); large ranges bin the axes side by side (each
+    // on its own: the same result for any thread count)
+    std::array<AxisSplit, 6> found;  // 0-2 object, 3-5 spatial
+    const auto bin_axes = [&](size_t first) {
+      const auto bin_axis = [&](size_t a) {
+        found[first + a] = first == 0 ? object_split(r, static_cast<int>(a)) : spatial_split(r, static_cast<int>(a));
+      };
+      if (n >= kParallelBinning) {
+        detail::ForkJoin fj;
+        tbb::parallel_for(size_t{0}, size_t{3}, fj.task(bin_axis));
+        fj.joined();
+      } else {
+        for (size_t a = 0; a < 3; ++a) bin_axis(a);
+      }
+    };
+    bin_axes(0);
+    int axis = -1;
+    for (int k = 0; k < 3; ++k) {
+      if (found[k].cost < (axis < 0 ? kInfinity : found[axis].cost)) axis = k;
+    }
+    if (r.budget > 0 && axis >= 0 &&
+        detail::intersect_boxes(found[axis].left, found[axis].right).surface_area() > kSpatialOverlap * root_area_) {
+      bin_axes(3);
+      for (int k = 3; k < 6; ++k) {
+        if (found[k].cost < found[axis].cost) axis = k;
+      }
+    }
+    const float area = r.box.surface_area();
+    const float split_cost = axis >= 0 && area > 0.0f ? opt_.node_cost + found[axis].cost / area : kInfinity;
+    if (n <= opt_.max_leaf && !(split_cost < leaf_cost(n))) return false;
+    if (axis >= 3) {
+      if (spatial_partition(r, axis - 3, found[axis], left, right)) return true;
+      // rounding left a side empty (not seen): the best object split instead
+      axis = -1;
+      for (int k = 0; k < 3; ++k) {
+        if (found[k].cost < (axis < 0 ? kInfinity : found[axis].cost)) axis = k;
+      }
+    }
+    if (axis < 0) {
+      // every centroid in one point (or no area): halves in index order
+      halve(r, left, right);
+      return true;
+    }
+    const int bins = opt_.bins;
+    const float lo = r.centroids.lo[axis];
+    const float scale = static_cast<float>(bins) / (r.centroids.hi[axis] - lo);
+    std::vector<Ref> below, above;  // in their order in r
+    below.reserve(found[axis].nl);
+    above.reserve(found[axis].nr);
+    Range bounded[2];  // each side's bounds, found on the way
+    for (const Ref& ref : r.refs) {
+      const glm::vec3 c = centroid(ref);
+      const int side = bin_of(c[axis], lo, scale, bins) < found[axis].bin ? 0 : 1;
+      (side == 0 ? below : above).push_back(ref);
+      bounded[side].box.extend(ref.box);
+      bounded[side].centroids.extend(c);
+    }
+    hand_down(r, std::move(below), std::move(above), 0, left, right);
+    left.box = bounded[0].box;
+    left.centroids = bounded[0].centroids;
+    right.box = bounded[1].box;
+    right.centroids = bounded[1].centroids;
+    return true;
+  }
+
+  /// `r`'s references halved in index order.
+  static void halve(Range& r, Range& left, Range& right) {
+    const uint32_t n = r.size();
+    std::vector<Ref> upper(r.refs.begin() + n / 2, r.refs.end());
+    r.refs.resize(n / 2);
+    hand_down(r, std::move(r.refs), std::move(upper), 0, left, right);
+    bounds(left);
+    bounds(right);
   }
 
   static int bin_of(float c, float lo, float scale, int bins) {
@@ -170,12 +389,12 @@ class Builder {
     for (uint32_t b = 0; b < blocks; ++b) {
       TriBlock block{};
       for (int l = 0; l < kBlockLanes; ++l) {
-        const uint32_t i = r.begin + kBlockLanes * b + static_cast<uint32_t>(l);
-        const uint32_t p = i < r.end ? prims_[i] : kInvalidId;
+        const uint32_t i = kBlockLanes * b + static_cast<uint32_t>(l);
+        const uint32_t p = i < n ? r.refs[i].prim : kInvalidId;
         block.prim[l] = p;
         // an empty lane repeats the block's first triangle: its hits are that triangle's, and
         // never win (kInvalidId loses every tie), so the kernels need no mask of used lanes
-        const Triangle& t = tris_[p == kInvalidId ? prims_[r.begin + kBlockLanes * b] : p];
+        const Triangle& t = tris_[p == kInvalidId ? r.refs[kBlockLanes * b].prim : p];
         const glm::vec3* v[3] = {&t.v0, &t.v1, &t.v2};
         for (int k = 0; k < 3; ++k)
           for (int a = 0; a < 3; ++a) block.v[k][a][l] = (*v[k])[a];
@@ -187,15 +406,12 @@ class Builder {
 
   /// The subtree of `r`, into `out`; returns its reference. Large children go to parallel tasks,
   /// each into its own Sub, joined after in child order.
-  uint32_t subtree(const Range& r, Sub& out, uint32_t depth = 0) {
-    Range left, right;
-    if (r.size() <= opt_.max_leaf) {
-      if (!split(r, left, right, depth)) return leaf(r, out);
-      // a split chosen: fall through to a node
-    }
+  uint32_t subtree(Range r, Sub& out, uint32_t depth = 0) {
     // gather up to eight children: split the one of largest area until eight or none splits
-    std::vector<Range> child{r};
+    std::vector<Range> child;
+    child.push_back(std::move(r));
     std::vector<bool> final_leaf{false};
+    Range left, right;
     while (child.size() < 8) {
       int pick = -1;
       float pick_area = -1.0f;
@@ -212,18 +428,20 @@ class Builder {
         final_leaf[pick] = true;
         continue;
       }
-      child[pick] = left;
+      child[pick] = std::move(left);
       final_leaf[pick] = false;
-      child.insert(child.begin() + pick + 1, right);
+      child.insert(child.begin() + pick + 1, std::move(right));
       final_leaf.insert(final_leaf.begin() + pick + 1, false);
     }
-    if (child.size() == 1) return leaf(r, out);  // nothing splits (cannot happen above max_leaf)
+    if (child.size() == 1) return leaf(child[0], out);  // nothing splits (cannot happen above max_leaf)
 
     const uint32_t index = static_cast<uint32_t>(out.nodes.size());
     out.nodes.emplace_back();
     std::array<uint32_t, 8> ref;
     ref.fill(WideNode::kEmpty);
-    // children with more triangles than the threshold: built side by side
+    std::array<Aabb, 8> box;
+    for (size_t c = 0; c < child.size(); ++c) box[c] = child[c].box;
+    // children with more references than the threshold: built side by side
     std::vector<size_t> big;
     for (size_t c = 0; c < child.size(); ++c) {
       if (child[c].size() > opt_.parallel_above) big.push_back(c);
@@ -232,7 +450,7 @@ class Builder {
     std::vector<uint32_t> sub_root(big.size());
     if (!big.empty()) {
       detail::ForkJoin fj;
-      const auto build = [&](size_t k) { sub_root[k] = subtree(child[big[k]], subs[k], depth + 1); };
+      const auto build = [&](size_t k) { sub_root[k] = subtree(std::move(child[big[k]]), subs[k], depth + 1); };
       tbb::parallel_for(size_t{0}, big.size(), fj.task(build));
       fj.joined();
     }
@@ -242,15 +460,15 @@ class Builder {
         ref[c] = join(subs[next_big], sub_root[next_big], out);
         ++next_big;
       } else {
-        ref[c] = subtree(child[c], out, depth + 1);
+        ref[c] = subtree(std::move(child[c]), out, depth + 1);
       }
     }
     WideNode& node = out.nodes[index];
     for (int c = 0; c < 8; ++c) {
       const bool used = static_cast<size_t>(c) < child.size();
       for (int a = 0; a < 3; ++a) {
-        node.lo[a][c] = used ? child[c].box.lo[a] : kInfinity;
-        node.hi[a][c] = used ? child[c].box.hi[a] : -kInfinity;
+        node.lo[a][c] = used ? box[c].lo[a] : kInfinity;
+        node.hi[a][c] = used ? box[c].hi[a] : -kInfinity;
       }
       node.child[c] = ref[c];
     }
@@ -278,8 +496,8 @@ class Builder {
 
   const std::vector<Triangle>& tris_;
   WideBvhBuildOptions opt_;
-  std::vector<Aabb> box_;
-  std::vector<uint32_t> prims_;
+  Range all_;
+  float root_area_ = 0.0f;
 };
 
 void walk(const WideBvh& bvh, uint32_t ref, double area, double inv_root, uint32_t depth, const WideBvhBuildOptions& opt,

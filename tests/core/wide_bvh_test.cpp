@@ -54,6 +54,28 @@ void expect_equals_brute_force(const WideBvh& bvh, const std::vector<Triangle>& 
   EXPECT_LT(blocked, rays.size()) << what << ": and miss sometimes";
 }
 
+/// How many leaf lanes hold each triangle (spatial splits may put one in several leaves).
+std::vector<int> lanes_per_triangle(const WideBvh& bvh, size_t triangles) {
+  std::vector<int> count(triangles, 0);
+  for (const TriBlock& b : bvh.blocks()) {
+    for (const uint32_t p : b.prim) {
+      if (p != kInvalidId) ++count.at(p);
+    }
+  }
+  return count;
+}
+
+/// Long slivers crossing a box in all directions: their own boxes overlap everywhere, the case
+/// spatial splits are for.
+std::vector<Triangle> crossing_slivers(std::mt19937& rng, int count) {
+  std::vector<Triangle> tris;
+  for (int i = 0; i < count; ++i) {
+    const glm::vec3 a = test::random_point(rng, 0.0f, 10.0f), b = test::random_point(rng, 0.0f, 10.0f);
+    tris.push_back({a, b, a + test::random_point(rng, -0.05f, 0.05f)});
+  }
+  return tris;
+}
+
 TEST(WideBvh, EmptySceneAndOneTriangle) {
   const WideBvh none(std::vector<Triangle>{});
   EXPECT_TRUE(none.empty());
@@ -76,8 +98,14 @@ TEST(WideBvh, RandomSoupsEqualBruteForceOnEveryInstructionSet) {
     const auto tris = test::random_soup(rng, 3000, seed == 3 ? 2.0f : 0.4f);
     std::vector<Ray> rays = test::random_rays(rng, test::brute_force_rays(4000));
     for (size_t i = 0; i < rays.size(); i += 3) rays[i].tmax = 3.0f;  // segments, as shadow rays are
-    const WideBvh bvh(tris);
-    on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "seed " + std::to_string(seed) + ", " + level); });
+    for (const float spatial : {0.0f, 0.5f}) {
+      WideBvhBuildOptions opt;
+      opt.spatial_budget = spatial;
+      const WideBvh bvh(tris, opt);
+      on_every_level([&](const std::string& level) {
+        expect_equals_brute_force(bvh, tris, rays, "seed " + std::to_string(seed) + ", spatial " + std::to_string(spatial) + ", " + level);
+      });
+    }
   }
 }
 
@@ -108,12 +136,13 @@ TEST(WideBvh, AdversarialCasesEqualBruteForce) {
     r.tmin = -12.0f / glm::length(r.dir);
     rays.push_back(r);
   }
-  for (const uint32_t max_leaf : {1u, 8u, 32u}) {
+  for (const auto& [max_leaf, spatial] : {std::pair{1u, 0.0f}, {8u, 0.0f}, {8u, 0.5f}, {32u, 0.5f}}) {
     WideBvhBuildOptions opt;
     opt.max_leaf = max_leaf;
+    opt.spatial_budget = spatial;
     const WideBvh bvh(tris, opt);
     on_every_level([&](const std::string& level) {
-      expect_equals_brute_force(bvh, tris, rays, "max_leaf " + std::to_string(max_leaf) + ", " + level);
+      expect_equals_brute_force(bvh, tris, rays, "max_leaf " + std::to_string(max_leaf) + ", spatial " + std::to_string(spatial) + ", " + level);
     });
   }
 }
@@ -123,8 +152,14 @@ TEST(WideBvh, SliversLeaningOffBoxPlanesEqualBruteForce) {
   std::vector<Ray> rays;
   test::sliver_scene(tris, rays);
   for (int i = 0; i < 50; ++i) rays.push_back(Ray{{1.0f + 0.04f * i, 3.0f, 0.5f}, {0.1f, 1.0f, 0.0f}});  // above it all, going up
-  const WideBvh bvh(tris);
-  on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "slivers, " + level); });
+  for (const float spatial : {0.0f, 0.5f}) {
+    WideBvhBuildOptions opt;
+    opt.spatial_budget = spatial;
+    const WideBvh bvh(tris, opt);
+    on_every_level([&](const std::string& level) {
+      expect_equals_brute_force(bvh, tris, rays, "slivers, spatial " + std::to_string(spatial) + ", " + level);
+    });
+  }
 }
 
 /// 16 rays of a 4x4 pixel block, as a pinhole camera at `o` looking along `ahead` casts them
@@ -242,14 +277,15 @@ TEST(WideBvh, PacketsEqualBruteForceOnEveryInstructionSet) {
   const std::vector<Triangle>* scenes[] = {&soup, &adversarial};
   for (const std::vector<Triangle>* tris : scenes) {
     const auto packets = test_packets(rng, *tris, test::brute_force_rays(4000) / 16 + 40);
-    for (const uint32_t max_leaf : {1u, 8u, 32u}) {
+    for (const auto& [max_leaf, spatial] : {std::pair{1u, 0.0f}, {8u, 0.0f}, {8u, 0.5f}, {32u, 0.0f}}) {
       WideBvhBuildOptions opt;
       opt.max_leaf = max_leaf;
+      opt.spatial_budget = spatial;
       const WideBvh bvh(*tris, opt);
       on_every_level([&](const std::string& level) {
         expect_packets_equal_brute_force(bvh, *tris, packets,
                                          std::string(tris == &soup ? "soup" : "adversarial") + ", max_leaf " +
-                                             std::to_string(max_leaf) + ", " + level);
+                                             std::to_string(max_leaf) + ", spatial " + std::to_string(spatial) + ", " + level);
       });
     }
   }
@@ -335,7 +371,10 @@ TEST(WideBvh, NonFiniteTrianglesAreLeftOutAndNeverHit) {
   tris.push_back({{0, 0, 0}, {inf, 0, 0}, {0, 1, 0}});
   tris.push_back({{nan, 0, 0}, {1, 0, 0}, {0, 1, 0}});
   const WideBvh bvh(tris);
-  EXPECT_EQ(bvh.stats().triangles_in_blocks, 500u);
+  const std::vector<int> lanes = lanes_per_triangle(bvh, tris.size());
+  for (size_t p = 0; p < 500; ++p) EXPECT_GE(lanes[p], 1) << "triangle " << p;
+  EXPECT_EQ(lanes[500], 0);
+  EXPECT_EQ(lanes[501], 0);
   expect_equals_brute_force(bvh, tris, test::random_rays(rng, 2000), "non-finite");
 }
 
@@ -359,13 +398,14 @@ TEST(WideBvh, BuildIsIdenticalForAnyThreadCount) {
   }
 }
 
-/// Every triangle sits in exactly one leaf lane, leaves hold at most max_leaf, and every child
-/// box holds the triangles below it.
+/// With object splits only, every triangle sits in exactly one leaf lane, leaves hold at most
+/// max_leaf, and every child box holds the triangles below it.
 TEST(WideBvh, EveryTriangleOnceInsideItsBoxes) {
   std::mt19937 rng(8);
   const auto tris = test::random_soup(rng, 5000, 0.6f);
   WideBvhBuildOptions opt;
   opt.max_leaf = 6;
+  opt.spatial_budget = 0.0f;
   const WideBvh bvh(tris, opt);
   std::vector<int> seen(tris.size(), 0);
   std::function<void(uint32_t, const Aabb&)> visit = [&](uint32_t ref, const Aabb& box) {
@@ -409,6 +449,97 @@ TEST(WideBvh, EveryTriangleOnceInsideItsBoxes) {
   for (const Triangle& t : tris) all.extend(Aabb::of(t));
   visit(bvh.view().root, all);
   for (size_t p = 0; p < tris.size(); ++p) ASSERT_EQ(seen[p], 1) << "triangle " << p;
+}
+
+/// Spatial splits: a triangle may sit in several leaves, each with a box of part of it. What the
+/// traversal needs is that every point of every triangle lies in the boxes of the whole path
+/// down to some leaf that holds the triangle. Checked on points spread over each triangle
+/// (vertices, edge points, inner points), against the leaves' paths; the references stay within
+/// the budget, and the hits equal brute force.
+TEST(WideBvh, SpatialSplitsCoverEveryPointOfEveryTriangle) {
+  std::mt19937 rng(21);
+  const auto tris = crossing_slivers(rng, 4000);
+  WideBvhBuildOptions opt;
+  opt.spatial_budget = 0.5f;
+  const WideBvh bvh(tris, opt);
+  const std::vector<int> lanes = lanes_per_triangle(bvh, tris.size());
+  size_t refs = 0;
+  for (const int c : lanes) refs += static_cast<size_t>(c);
+  EXPECT_GT(refs, tris.size() + tris.size() / 10) << "spatial splits should copy many of these slivers";
+  EXPECT_LE(refs, tris.size() + static_cast<size_t>(opt.spatial_budget * static_cast<float>(tris.size())));
+
+  // each triangle's leaves, as the intersection of the boxes on their paths
+  std::vector<std::vector<Aabb>> paths(tris.size());
+  std::function<void(uint32_t, const Aabb&)> visit = [&](uint32_t ref, const Aabb& path) {
+    if (WideNode::is_leaf(ref)) {
+      for (uint32_t b = 0; b < WideNode::block_count(ref); ++b) {
+        for (const uint32_t p : bvh.blocks()[WideNode::first_block(ref) + b].prim) {
+          if (p != kInvalidId) paths[p].push_back(path);
+        }
+      }
+      return;
+    }
+    const WideNode& n = bvh.nodes()[wide_node_index(ref)];
+    for (int c = 0; c < 8; ++c) {
+      if (n.child[c] == WideNode::kEmpty) continue;
+      Aabb b;
+      b.lo = glm::max(path.lo, glm::vec3(n.lo[0][c], n.lo[1][c], n.lo[2][c]));
+      b.hi = glm::min(path.hi, glm::vec3(n.hi[0][c], n.hi[1][c], n.hi[2][c]));
+      visit(n.child[c], b);
+    }
+  };
+  visit(bvh.view().root, Aabb{glm::vec3(-kInfinity), glm::vec3(kInfinity)});
+  size_t uncovered = 0;
+  for (size_t p = 0; p < tris.size(); ++p) {
+    const Triangle& t = tris[p];
+    std::vector<glm::vec3> points{t.v0, t.v1, t.v2};
+    for (int k = 1; k < 20; ++k) {  // along an edge, and inside (barycentric 0.25 s, 0.5 s, 1 - 0.75 s)
+      const float s = static_cast<float>(k) / 20.0f;
+      points.push_back(t.v0 + s * (t.v1 - t.v0));
+      points.push_back(t.v2 + 0.5f * s * (t.v1 - t.v2) + 0.25f * s * (t.v0 - t.v2));
+    }
+    for (size_t k = 0; k < points.size(); ++k) {
+      const glm::vec3 q = points[k];
+      bool inside = false;
+      for (const Aabb& b : paths[p]) {
+        inside = inside || (q.x >= b.lo.x && q.y >= b.lo.y && q.z >= b.lo.z && q.x <= b.hi.x && q.y <= b.hi.y && q.z <= b.hi.z);
+      }
+      if (!inside && ++uncovered <= 5) ADD_FAILURE() << "triangle " << p << " point " << k << " lies outside all its leaves' paths";
+    }
+  }
+  EXPECT_EQ(uncovered, 0u);
+
+  // rays through the slivers' vertices and edges, and random ones
+  std::vector<Ray> rays = test::random_rays(rng, 2000);
+  for (size_t p = 0; p < tris.size(); p += 4) {
+    const glm::vec3 o = test::random_point(rng, -2.0f, 12.0f);
+    rays.push_back(Ray{o, 0.5f * (tris[p].v0 + tris[p].v1) - o});
+    rays.push_back(Ray{o, tris[p].v1 - o});
+  }
+  on_every_level([&](const std::string& level) { expect_equals_brute_force(bvh, tris, rays, "slivers, " + level); });
+}
+
+/// On slivers crossing each other, spatial splits lower the hierarchy's SAH cost below that of
+/// object splits alone.
+TEST(WideBvh, SpatialSplitsLowerTheCostOfCrossingSlivers) {
+  std::mt19937 rng(22);
+  const auto tris = crossing_slivers(rng, 4000);
+  WideBvhBuildOptions object_only;
+  object_only.spatial_budget = 0.0f;
+  WideBvhBuildOptions spatial;
+  spatial.spatial_budget = 0.5f;
+  const double without = WideBvh(tris, object_only).stats(object_only).sah_cost;
+  const double with = WideBvh(tris, spatial).stats(spatial).sah_cost;
+  EXPECT_LT(with, 0.99 * without) << "SAH cost " << with << " with spatial splits, " << without << " without";
+}
+
+TEST(WideBvh, SpatialBudgetOutOfRangeIsRejected) {
+  const std::vector<Triangle> tris{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}};
+  for (const float bad : {-0.1f, 1.5f, std::numeric_limits<float>::quiet_NaN()}) {
+    WideBvhBuildOptions opt;
+    opt.spatial_budget = bad;
+    EXPECT_THROW(WideBvh(tris, opt), std::invalid_argument) << bad;
+  }
 }
 
 }  // namespace

@@ -13,6 +13,12 @@
 // child of largest surface area again and again (as in Wald, Benthin & Boulos, "Getting Rid of
 // Packets", IEEE Symposium on Interactive Ray Tracing 2008). Large subtrees are built in
 // parallel and joined in a fixed order: the arrays do not depend on the thread count.
+// Optionally with spatial splits (Stich, Friedrich & Dietrich, "Spatial Splits in Bounding Volume
+// Hierarchies", HPG 2009): where a node's object split leaves overlapping sides, a plane may cut
+// the triangles that cross it, each side keeping a reference with a box of its part (clipped
+// exactly, then widened past the rounding). A triangle may then sit in several leaves; every
+// point of it lies in the boxes down to one of them, and the leaves test whole triangles, so the
+// hits stay the kd-tree's.
 //
 // Traversal: children tested with precomputed near/far planes by the ray's octant, visited
 // nearest first; the triangles with the same watertight test, the same operations in the same
@@ -70,14 +76,20 @@ struct WideBvhBuildOptions {
   float node_cost = 1.0f;     ///< cost of a node test, relative to
   float block_cost = 1.0f;    ///< the cost of testing a block of kBlockLanes triangles
   uint32_t max_leaf = 8;      ///< triangles a leaf at most (up to 32)
-  uint32_t parallel_above = 16384;  ///< subtrees with more triangles are built as parallel tasks
+  uint32_t parallel_above = 2048;  ///< subtrees with more references are built as parallel tasks
+  /// Spatial splits (see wide_bvh_build.cpp) may add up to this many references per triangle, 0
+  /// to 1; 0, the default, builds with object splits only. They pay where objects stand in open
+  /// space and the rays come from outside them (the BART robots: single rays 1.19x, incoherent
+  /// 1.07x), and cost where the camera stands inside a room of large triangles (the BART kitchen:
+  /// 0.99x, 0.94x); the build takes about twice as long. See docs/benchmarks.md.
+  float spatial_budget = 0.0f;
 };
 
 struct WideBvhStats {
   uint32_t nodes = 0;
   uint32_t leaves = 0;
   uint32_t blocks = 0;
-  uint32_t triangles_in_blocks = 0;
+  uint32_t triangles_in_blocks = 0;  ///< lanes holding a triangle: one a reference
   uint32_t max_depth = 0;
   double sah_cost = 0.0;  ///< expected cost of a random ray meeting the root box, in node-test units
 };
