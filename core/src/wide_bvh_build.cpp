@@ -181,7 +181,7 @@ class Builder {
         continue;
       }
       // the triangle's part in each bin from where its edges cross the bin's planes: an estimate
-      // for the costs only (the partition clips exactly, see split)
+      // for the costs only (spatial_partition clips exactly)
       const Triangle& t = tris_[ref.prim];
       const glm::vec3 v[3] = {t.v0, t.v1, t.v2};
       for (int b = b0; b <= b1; ++b) {
