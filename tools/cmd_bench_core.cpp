@@ -597,7 +597,7 @@ void add_bench_core_command(CLI::App& app) {
   cmd->add_option("--wide-spatial", opt->wide.spatial_budget,
                   "the wide BVH's spatial splits: references they may add per triangle (0: none)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0f, 1.0f));
+      ->check(finite_range(0, 1));
   cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str()->check(finite_range(0, 1));

@@ -79,9 +79,10 @@ struct WideBvhBuildOptions {
   uint32_t parallel_above = 2048;  ///< subtrees with more references are built as parallel tasks
   /// Spatial splits (see wide_bvh_build.cpp) may add up to this many references per triangle, 0
   /// to 1; 0, the default, builds with object splits only. They pay where objects stand in open
-  /// space and the rays come from outside them (the BART robots: single rays 1.19x, incoherent
-  /// 1.07x), and cost where the camera stands inside a room of large triangles (the BART kitchen:
-  /// 0.99x, 0.94x); the build takes about twice as long. See docs/benchmarks.md.
+  /// space and the rays come from outside them (the BART robots at 0.5: single rays 1.19x and
+  /// incoherent 1.07x the speed without), and cost where the camera stands inside a room of large
+  /// triangles (the BART kitchen: 0.99x, 0.94x); the build takes about twice as long. See
+  /// docs/benchmarks.md.
   float spatial_budget = 0.0f;
 };
 
@@ -89,7 +90,7 @@ struct WideBvhStats {
   uint32_t nodes = 0;
   uint32_t leaves = 0;
   uint32_t blocks = 0;
-  uint32_t triangles_in_blocks = 0;  ///< lanes holding a triangle: one a reference
+  uint32_t triangles_in_blocks = 0;  ///< lanes holding a triangle (after spatial splits, a triangle may fill several)
   uint32_t max_depth = 0;
   double sah_cost = 0.0;  ///< expected cost of a random ray meeting the root box, in node-test units
 };
