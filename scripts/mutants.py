@@ -83,7 +83,7 @@ CATALOGUE = [
      "        above.push_back(Ref{t, ref.prim});\n        ++copies;\n", "        ++copies;\n",
      "a triangle cut by a spatial split would keep only its part below the plane: rays meeting the rest miss it"),
     ("wide-spatial-budget-ignored", "core/src/wide_bvh_build.cpp",
-     "if (cnt + right_count[b] - r.size() > r.budget) continue;", "if (false) continue;",
+     "if (cnt + right[b].count - r.size() > r.budget) continue;", "if (false) continue;",
      "spatial splits would copy references past the budget (and its count would wrap)"),
     # Table 1's workloads
     ("whitted-paper-mode-shadows-everywhere", "core/include/artrace/core/whitted.h",

@@ -115,69 +115,84 @@ class Builder {
     uint32_t nl = 0, nr = 0;
   };
 
-  /// The best object split of `r` on axis a: references binned by their boxes' centroids.
-  AxisSplit object_split(const Range& r, int a) const {
-    AxisSplit best;
-    const int bins = opt_.bins;
-    const float lo = r.centroids.lo[a], extent = r.centroids.hi[a] - lo;
-    if (!(extent > 0.0f)) return best;
-    const float scale = static_cast<float>(bins) / extent;
-    struct Bin {  // trivial: only the first `bins` are set, not all 256 at every split
+  /// A bin of a split's sweep: the box of what it holds (trivial: only the bins in use are set,
+  /// not all 256 at every split), the references that start in it and those that end in it
+  /// (for an object split, both its count).
+  struct Bin {
+    glm::vec3 lo, hi;
+    uint32_t enter, exit;
+  };
+
+  /// The cheapest split between `bins` bins of `r`: left of it every reference that starts in a
+  /// bin before, right of it every one that ends in a bin after; none that would copy more
+  /// references than r's budget allows.
+  AxisSplit sweep(const std::array<Bin, 256>& bin, int bins, const Range& r) const {
+    struct Side {  // trivial, as Bin
       glm::vec3 lo, hi;
       uint32_t count;
     };
-    std::array<Bin, 256> bin;
-    for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0};
-    for (const Ref& ref : r.refs) {
-      const int b = bin_of(centroid(ref)[a], lo, scale, bins);
-      bin[b].lo = glm::min(bin[b].lo, ref.box.lo);
-      bin[b].hi = glm::max(bin[b].hi, ref.box.hi);
-      ++bin[b].count;
-    }
-    std::array<Aabb, 256> right_box;
-    std::array<uint32_t, 256> right_count;
+    std::array<Side, 256> right;
     Aabb acc;
     uint32_t cnt = 0;
     for (int b = bins - 1; b > 0; --b) {
       acc.extend(Aabb{bin[b].lo, bin[b].hi});
-      cnt += bin[b].count;
-      right_box[b] = acc;
-      right_count[b] = cnt;
+      cnt += bin[b].exit;
+      right[b] = Side{acc.lo, acc.hi, cnt};
     }
+    AxisSplit best;
     acc = Aabb{};
     cnt = 0;
     for (int b = 1; b < bins; ++b) {  // split between bins b - 1 and b
       acc.extend(Aabb{bin[b - 1].lo, bin[b - 1].hi});
-      cnt += bin[b - 1].count;
-      if (cnt == 0 || right_count[b] == 0) continue;
-      const float cost = acc.surface_area() * leaf_cost(cnt) + right_box[b].surface_area() * leaf_cost(right_count[b]);
-      if (cost < best.cost) best = AxisSplit{cost, b, acc, right_box[b], cnt, right_count[b]};
+      cnt += bin[b - 1].enter;
+      if (cnt == 0 || right[b].count == 0) continue;
+      if (cnt + right[b].count - r.size() > r.budget) continue;  // more copies than allowed
+      const Aabb right_box{right[b].lo, right[b].hi};
+      const float cost = acc.surface_area() * leaf_cost(cnt) + right_box.surface_area() * leaf_cost(right[b].count);
+      if (cost < best.cost) best = AxisSplit{cost, b, acc, right_box, cnt, right[b].count};
     }
     return best;
+  }
+
+  /// The best object split of `r` on axis a: references binned by their boxes' centroids.
+  AxisSplit object_split(const Range& r, int a) const {
+    const int bins = opt_.bins;
+    const float lo = r.centroids.lo[a], extent = r.centroids.hi[a] - lo;
+    if (!(extent > 0.0f)) return AxisSplit{};
+    const float scale = static_cast<float>(bins) / extent;
+    std::array<Bin, 256> bin;
+    for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0, 0};
+    for (const Ref& ref : r.refs) {
+      Bin& in = bin[bin_of(centroid(ref)[a], lo, scale, bins)];
+      in.lo = glm::min(in.lo, ref.box.lo);
+      in.hi = glm::max(in.hi, ref.box.hi);
+      ++in.enter;
+    }
+    for (int b = 0; b < bins; ++b) bin[b].exit = bin[b].enter;
+    return sweep(bin, bins, r);
   }
 
   /// The best spatial split of `r` on axis a (Stich et al.): equal bins over the node's box, a
   /// reference counted on every bin it reaches, in the bins its box starts and ends in; no more
   /// copies than r's budget allows.
   AxisSplit spatial_split(const Range& r, int a) const {
-    AxisSplit best;
     const int bins = opt_.bins;
     const float lo = detail::coord(r.box.lo, a), extent = detail::coord(r.box.hi, a) - lo;
-    if (!(extent > 0.0f)) return best;
+    if (!(extent > 0.0f)) return AxisSplit{};
     const float scale = static_cast<float>(bins) / extent;
-    struct Bin {
-      Aabb box;
-      uint32_t enter, exit;
-    };
     std::array<Bin, 256> bin;
-    for (int b = 0; b < bins; ++b) bin[b] = Bin{Aabb{}, 0, 0};
+    for (int b = 0; b < bins; ++b) bin[b] = Bin{glm::vec3(kInfinity), glm::vec3(-kInfinity), 0, 0};
+    const auto add = [&](int b, const Aabb& part) {
+      bin[b].lo = glm::min(bin[b].lo, part.lo);
+      bin[b].hi = glm::max(bin[b].hi, part.hi);
+    };
     for (const Ref& ref : r.refs) {
       const int b0 = bin_of(detail::coord(ref.box.lo, a), lo, scale, bins);
       const int b1 = bin_of(detail::coord(ref.box.hi, a), lo, scale, bins);
       ++bin[b0].enter;
       ++bin[b1].exit;
       if (b0 == b1) {
-        bin[b0].box.extend(ref.box);
+        add(b0, ref.box);
         continue;
       }
       // the triangle's part in each bin from where its edges cross the bin's planes: an estimate
@@ -197,30 +212,10 @@ class Builder {
             if ((xa < p && ya > p) || (xa > p && ya < p)) part.extend(x + (p - xa) / (ya - xa) * (y - x));
           }
         }
-        bin[b].box.extend(detail::intersect_boxes(part, ref.box));
+        add(b, detail::intersect_boxes(part, ref.box));
       }
     }
-    std::array<Aabb, 256> right_box;
-    std::array<uint32_t, 256> right_count;
-    Aabb acc;
-    uint32_t cnt = 0;
-    for (int b = bins - 1; b > 0; --b) {
-      acc.extend(bin[b].box);
-      cnt += bin[b].exit;
-      right_box[b] = acc;
-      right_count[b] = cnt;
-    }
-    acc = Aabb{};
-    cnt = 0;
-    for (int b = 1; b < bins; ++b) {  // split at the plane between bins b - 1 and b
-      acc.extend(bin[b - 1].box);
-      cnt += bin[b - 1].enter;
-      if (cnt == 0 || right_count[b] == 0) continue;
-      if (cnt + right_count[b] - r.size() > r.budget) continue;  // more copies than allowed
-      const float cost = acc.surface_area() * leaf_cost(cnt) + right_box[b].surface_area() * leaf_cost(right_count[b]);
-      if (cost < best.cost) best = AxisSplit{cost, b, acc, right_box[b], cnt, right_count[b]};
-    }
-    return best;
+    return sweep(bin, bins, r);
   }
 
   /// Plane b of `bins` equal bins over [lo, lo + extent].
@@ -314,10 +309,11 @@ class Builder {
       }
     };
     bin_axes(0);
-    int axis = -1;
+    int object_axis = -1;  // the cheapest object split's, -1 when none
     for (int k = 0; k < 3; ++k) {
-      if (found[k].cost < (axis < 0 ? kInfinity : found[axis].cost)) axis = k;
+      if (found[k].cost < (object_axis < 0 ? kInfinity : found[object_axis].cost)) object_axis = k;
     }
+    int axis = object_axis;
     if (r.budget > 0 && axis >= 0 &&
         detail::intersect_boxes(found[axis].left, found[axis].right).surface_area() > kSpatialOverlap * root_area_) {
       bin_axes(3);
@@ -330,11 +326,7 @@ class Builder {
     if (n <= opt_.max_leaf && !(split_cost < leaf_cost(n))) return false;
     if (axis >= 3) {
       if (spatial_partition(r, axis - 3, found[axis], left, right)) return true;
-      // rounding left a side empty (not seen): the best object split instead
-      axis = -1;
-      for (int k = 0; k < 3; ++k) {
-        if (found[k].cost < (axis < 0 ? kInfinity : found[axis].cost)) axis = k;
-      }
+      axis = object_axis;  // rounding left a side empty (not seen): the best object split instead
     }
     if (axis < 0) {
       // every centroid in one point (or no area): halves in index order
