@@ -291,7 +291,7 @@ void run(const Options& opt) {
   core::WideBvh wide;
   const double wide_build_ms = median_ms(opt.runs, [&] { arena.execute([&] { wide = core::WideBvh(tris, opt.wide); }); });
   const core::WideBvhStats wst = wide.stats(opt.wide);
-  out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"spatial_budget", opt.wide.spatial_budget}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
+  out["wide_bvh"] = {{"build_ms", wide_build_ms}, {"spatial_budget", opt.wide.spatial_budget}, {"bins", opt.wide.bins}, {"nodes", wst.nodes}, {"leaves", wst.leaves}, {"blocks", wst.blocks},
                      {"triangles_in_blocks", wst.triangles_in_blocks}, {"max_depth", wst.max_depth}, {"sah_cost", wst.sah_cost}};
   size_t wide_mismatch = 0;
   for (const Workload* w : {&primary, &bounce}) {
@@ -527,8 +527,8 @@ void run(const Options& opt) {
               opt.lanes, tris.size(), opt.runs);
   std::printf("  kd-tree build %.1f ms, %u nodes (%zu bytes), %u leaves, depth %u, SAH cost %.2f\n", build_ms,
               st.nodes, st.node_bytes, st.leaves, st.max_depth, st.sah_cost);
-  std::printf("  wide BVH build %.1f ms (spatial splits: budget %g), %u nodes, %u leaves (%u blocks of 8 for %u triangle references), depth %u, SAH cost %.2f\n",
-              wide_build_ms, opt.wide.spatial_budget, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
+  std::printf("  wide BVH build %.1f ms (%d bins, spatial splits: budget %g), %u nodes, %u leaves (%u blocks of 8 for %u triangle references), depth %u, SAH cost %.2f\n",
+              wide_build_ms, opt.wide.bins, opt.wide.spatial_budget, wst.nodes, wst.leaves, wst.blocks, wst.triangles_in_blocks, wst.max_depth, wst.sah_cost);
   std::printf("  %-22s %12s %12s\n", "Mrays/s", "artrace", opt.reference == "embree" ? "embree" : "");
   for (const char* key : {"primary_single", "primary_single_kdtree", "primary_packet", "primary_packet_kdtree", "shadow", "shadow_hinted", "incoherent",
                           "incoherent_kdtree", "incoherent_kdtree_packets"}) {
@@ -598,6 +598,9 @@ void add_bench_core_command(CLI::App& app) {
                   "the wide BVH's spatial splits: references they may add per triangle (0: none)")
       ->capture_default_str()
       ->check(finite_range(0, 1));
+  cmd->add_option("--wide-bins", opt->wide.bins, "the wide BVH's SAH bins per axis")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 256));
   cmd->add_option("--sah-traversal", opt->build.traversal_cost, "SAH traversal cost K_T")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--sah-intersection", opt->build.intersection_cost, "SAH intersection cost K_I")->capture_default_str()->check(finite_range(0.001, 1000));
   cmd->add_option("--empty-bonus", opt->build.empty_bonus, "SAH empty-space factor")->capture_default_str()->check(finite_range(0, 1));

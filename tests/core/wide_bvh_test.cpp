@@ -542,5 +542,19 @@ TEST(WideBvh, SpatialBudgetOutOfRangeIsRejected) {
   }
 }
 
+TEST(WideBvh, BinCountOutOfRangeIsRejected) {
+  const std::vector<Triangle> tris{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}};
+  for (const int bad : {-1, 0, 1, 257}) {
+    WideBvhBuildOptions opt;
+    opt.bins = bad;
+    EXPECT_THROW(WideBvh(tris, opt), std::invalid_argument) << bad;
+  }
+  for (const int good : {2, 256}) {  // the ends of the range build
+    WideBvhBuildOptions opt;
+    opt.bins = good;
+    EXPECT_EQ(WideBvh(tris, opt).intersect(Ray{{0.25f, 0.25f, 1.0f}, {0.0f, 0.0f, -1.0f}}).prim, 0u) << good;
+  }
+}
+
 }  // namespace
 }  // namespace artrace::core
