@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -33,6 +35,26 @@ inline std::filesystem::path shared_data() {
   if (const char* env = std::getenv("ARTRACE_SHARED_DATA"); env && *env) return env;
   return ARTRACE_SHARED_DATA_DEFAULT;
 }
+
+/// This test process's own folder for the files its test writes, under the system's temporary
+/// folder: ctest runs the tests as parallel processes (and two runs may share a machine), so a
+/// fixed name there is written and removed by two tests at once. Removed, with whatever is left
+/// in it, when the process ends.
+inline const std::filesystem::path& scratch_root() {
+  struct Root {
+    std::filesystem::path path = std::filesystem::temp_directory_path() / ("artrace_tests." + std::to_string(::getpid()));
+    Root() { std::filesystem::create_directories(path); }
+    ~Root() {
+      std::error_code ignored;
+      std::filesystem::remove_all(path, ignored);
+    }
+  };
+  static const Root root;
+  return root.path;
+}
+
+/// `name` (a file or folder) in scratch_root().
+inline std::filesystem::path scratch_path(const std::string& name) { return scratch_root() / name; }
 
 /// Skips the current test with a clear message when the shared scenes are not there.
 #define ARTRACE_REQUIRE_SHARED(rel)                                                                \

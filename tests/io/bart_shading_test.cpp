@@ -16,7 +16,7 @@ void write_bytes(const std::filesystem::path& p, const std::string& bytes) {
 }
 
 TEST(Ppm, ReadsBinaryPpmWithCommentsAsLinearColour) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm";
+  const auto dir = ::artrace::test::scratch_path("artrace_ppm");
   std::filesystem::create_directories(dir);
   write_bytes(dir / "ok.ppm", std::string("P6\n# a comment\n2 1\n255\n") + std::string("\x00\x80\xff\x10\x20\x30", 6));
   const core::Texture t = load_ppm(dir / "ok.ppm");
@@ -28,7 +28,7 @@ TEST(Ppm, ReadsBinaryPpmWithCommentsAsLinearColour) {
 }
 
 TEST(Ppm, BrokenFilesAreRefusedWithTheFileNamed) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm_bad";
+  const auto dir = ::artrace::test::scratch_path("artrace_ppm_bad");
   std::filesystem::create_directories(dir);
   write_bytes(dir / "ascii.ppm", "P3\n1 1\n255\n0 0 0\n");
   write_bytes(dir / "truncated.ppm", std::string("P6\n4 4\n255\n") + std::string(10, '\x01'));
@@ -58,7 +58,7 @@ TEST(Ppm, BrokenFilesAreRefusedWithTheFileNamed) {
 // it before noticing that the file holds a few bytes. The sizes are now checked against the file
 // first, and the error says what the header declares and what follows it.
 TEST(Ppm, HugeDeclaredSizeIsRefusedBeforeAllocating) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ppm_huge";
+  const auto dir = ::artrace::test::scratch_path("artrace_ppm_huge");
   std::filesystem::create_directories(dir);
   write_bytes(dir / "huge.ppm", std::string("P6\n8000 8000\n65535\n") + std::string(5, '\x01'));
   try {

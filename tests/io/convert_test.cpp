@@ -2,6 +2,7 @@
 // folder and back to ONI keeps every frame bit for bit (depth values, colour bytes, timestamps).
 #include "../cli_util.h"
 #include "artrace/io/recording.h"
+#include "../test_util.h"
 
 namespace artrace::io {
 namespace {
@@ -26,7 +27,7 @@ void expect_same_frames(const std::vector<ar::SensorFrame>& a, const std::vector
 TEST(Convert, RealOniToTumAndBackKeepsEveryFrame) {
   ARTRACE_REQUIRE_BINARY();
   ARTRACE_REQUIRE_SHARED("rgbd/oni-kinect1-tabletop-4f/Captured.oni");
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_convert";
+  const auto dir = ::artrace::test::scratch_path("artrace_convert");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   const auto tum = dir / "tum", oni = dir / "back.oni";

@@ -1,6 +1,7 @@
 // The export command as a user runs it: the clip read back with OpenCV, and no file left behind
 // when an export stops early.
 #include "../cli_util.h"
+#include "../test_util.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
@@ -16,7 +17,7 @@ namespace {
 
 TEST(Export, ClipReadsBackWithTheOverlayWhereTheObjectIs) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_export";
+  const auto dir = ::artrace::test::scratch_path("artrace_export");
   std::filesystem::remove_all(dir);
   const auto scene = box_scene(dir);
   const auto clip = dir / "clip.avi";
@@ -44,7 +45,7 @@ TEST(Export, ClipReadsBackWithTheOverlayWhereTheObjectIs) {
 
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_export_stop";
+  const auto dir = ::artrace::test::scratch_path("artrace_export_stop");
   std::filesystem::remove_all(dir);
   const auto scene = box_scene(dir);
   // a recording whose 6th colour image is damaged: the export fails there
@@ -81,7 +82,7 @@ TEST(Export, StoppedExportLeavesNoFile) {
 /// refused before any work, naming the option.
 TEST(Cli, OutOfRangeOptionsAreRefusedByName) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_cli_ranges";
+  const auto dir = ::artrace::test::scratch_path("artrace_cli_ranges");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   const std::string room = (kRoot / "data/recordings/room").string(), aff = (kRoot / "data/scenes/room.aff").string();
@@ -119,7 +120,7 @@ TEST(Cli, OutOfRangeOptionsAreRefusedByName) {
 /// and 2 threads, compared byte for byte.
 TEST(Export, SameFramesForAnyThreadCount) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_export_threads";
+  const auto dir = ::artrace::test::scratch_path("artrace_export_threads");
   std::filesystem::remove_all(dir);
   std::vector<std::vector<char>> frames[2];
   for (const int threads : {1, 2}) {
@@ -150,7 +151,7 @@ TEST(Export, SameFramesForAnyThreadCount) {
 /// what it found.
 TEST(Export, DepthShiftAutoIsTheRecordingsOwnShift) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_export_depth_shift";
+  const auto dir = ::artrace::test::scratch_path("artrace_export_depth_shift");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   std::map<std::string, std::vector<std::vector<char>>> frames;
@@ -183,7 +184,7 @@ TEST(Export, DepthShiftAutoIsTheRecordingsOwnShift) {
 /// --depth-shift 1,0, which follows the recording's own poses more closely than the depth as read.
 TEST(Track, DepthShiftAutoLinesTheDepthUpAndTracksCloser) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_track_depth_shift";
+  const auto dir = ::artrace::test::scratch_path("artrace_track_depth_shift");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   std::map<std::string, nlohmann::json> drift;
@@ -215,7 +216,7 @@ TEST(Track, DepthShiftAutoLinesTheDepthUpAndTracksCloser) {
 TEST(Export, RealOniRecordingThroughTheArPath) {
   ARTRACE_REQUIRE_BINARY();
   ARTRACE_REQUIRE_SHARED("rgbd/oni-kinect1-tabletop-4f/Captured.oni");
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_export_oni";
+  const auto dir = ::artrace::test::scratch_path("artrace_export_oni");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   const auto scene = dir / "scene.json";
@@ -246,7 +247,7 @@ TEST(Export, RealOniRecordingThroughTheArPath) {
 /// wrong.
 TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
   ARTRACE_REQUIRE_BINARY();
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_bench_core_embree";
+  const auto dir = ::artrace::test::scratch_path("artrace_bench_core_embree");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   for (const int lanes : {8, 16}) {

@@ -137,7 +137,7 @@ ar::ColorImage render(const std::filesystem::path& model, const ar::SensorFrame&
 }
 
 std::filesystem::path test_dir(const std::string& name) {
-  const auto d = std::filesystem::temp_directory_path() / name;
+  const auto d = ::artrace::test::scratch_path(name);
   std::filesystem::remove_all(d);
   std::filesystem::create_directories(d);
   return d;

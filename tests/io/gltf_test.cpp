@@ -9,7 +9,7 @@ namespace artrace::io {
 namespace {
 
 TEST(Gltf, WrittenModelsLoadBackWithAnimation) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf";
+  const auto dir = ::artrace::test::scratch_path("artrace_gltf");
   for (const char* name : {"box.gltf", "box.glb"}) {
     const auto path = dir / name;
     const GltfModel box = make_spinning_box(0.5f, {0.8f, 0.2f, 0.1f});
@@ -57,7 +57,7 @@ TEST(Gltf, StepAndCubicSplineSamplers) {
   cubic.values = {glm::vec4(0), glm::vec4(1, 1, 1, 0), glm::vec4(0), glm::vec4(0), glm::vec4(3, 3, 3, 0), glm::vec4(0)};
   m.animations[0].channels = {step, cubic};
   m.animations[0].duration_s = 2.5f;
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf2";
+  const auto dir = ::artrace::test::scratch_path("artrace_gltf2");
   write_gltf(m, dir / "samplers.gltf");
   const GltfModel l = load_gltf(dir / "samplers.gltf");
   const glm::mat4 a = l.node_transforms(0, 1.5f)[0];
@@ -68,7 +68,7 @@ TEST(Gltf, StepAndCubicSplineSamplers) {
 }
 
 TEST(Gltf, BrokenFilesNameTheFile) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf_bad";
+  const auto dir = ::artrace::test::scratch_path("artrace_gltf_bad");
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "garbage.gltf") << "{ this is not json";
   std::ofstream(dir / "empty.glb") << "";
@@ -140,7 +140,7 @@ glm::vec3 bent_tube_vertex(const glm::vec3& v, float length, float degrees) {
 }
 
 TEST(Gltf, SkinnedMeshBendsAsLinearBlendSkinningSays) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_gltf_skin";
+  const auto dir = ::artrace::test::scratch_path("artrace_gltf_skin");
   const float length = 1.2f;
   for (const char* name : {"tube.gltf", "tube.glb"}) {
     write_gltf(make_bending_tube(length, 0.2f, {0.2f, 0.4f, 0.9f}), dir / name);
@@ -204,7 +204,7 @@ TEST(Gltf, SkinningTakesEveryInfluenceSetRenormalised) {
 }
 
 TEST(ArRuntime, TheThreeKindsOfObjectsStaticAnimatedAndSkinned) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_kinds";
+  const auto dir = ::artrace::test::scratch_path("artrace_ar_kinds");
   std::filesystem::create_directories(dir);
   write_gltf(make_bending_tube(1.2f, 0.2f, {0.2f, 0.4f, 0.9f}), dir / "tube.gltf");
   write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
@@ -238,7 +238,7 @@ TEST(ArRuntime, TheThreeKindsOfObjectsStaticAnimatedAndSkinned) {
 /// key, a wrong type, and numbers too large for the renderer's float arithmetic (3e38 is a float,
 /// 1e39 is not even that).
 TEST(ArSceneFile, MalformedScenesNameFileKeyAndProblem) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_malformed";
+  const auto dir = ::artrace::test::scratch_path("artrace_ar_malformed");
   std::filesystem::create_directories(dir);
   write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
   const std::pair<const char*, const char*> cases[] = {
@@ -270,7 +270,7 @@ TEST(ArSceneFile, MalformedScenesNameFileKeyAndProblem) {
 /// faces) keeps T^2 of the light, static or node-animated, and one through the skinned tube some
 /// but not all of it; the same models, not glass, block it.
 TEST(ArRuntime, GlassOfEveryKindLetsShadowRaysThrough) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_ar_glass";
+  const auto dir = ::artrace::test::scratch_path("artrace_ar_glass");
   std::filesystem::create_directories(dir);
   write_gltf(make_bending_tube(1.2f, 0.2f, {0.2f, 0.4f, 0.9f}), dir / "tube.gltf");
   write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");

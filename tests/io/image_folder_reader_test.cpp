@@ -12,7 +12,7 @@ namespace artrace::io {
 namespace {
 
 std::filesystem::path make_folder(const std::string& name, bool video, int frames) {
-  const auto dir = std::filesystem::temp_directory_path() / name;
+  const auto dir = ::artrace::test::scratch_path(name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir / "depth");
   if (!video) std::filesystem::create_directories(dir / "color");

@@ -13,7 +13,7 @@ namespace artrace::io {
 namespace {
 
 std::filesystem::path write_file(const std::string& name, const std::string& text) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_intrinsics";
+  const auto dir = ::artrace::test::scratch_path("artrace_intrinsics");
   std::filesystem::create_directories(dir);
   std::ofstream(dir / name) << text;
   return dir / name;
@@ -113,7 +113,7 @@ TEST(CameraFile, BrokenFilesNameTheFileAndTheProblem) {
 
 /// An image folder of one frame: a black colour image with a white dot, flat depth.
 std::filesystem::path dot_folder(const std::string& name, int x, int y) {
-  const auto dir = std::filesystem::temp_directory_path() / name;
+  const auto dir = ::artrace::test::scratch_path(name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir / "color");
   std::filesystem::create_directories(dir / "depth");

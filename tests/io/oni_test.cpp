@@ -26,7 +26,7 @@ uint8_t color_value(int x, int y, int k, int c) {
 uint64_t timestamp(int k) { return 1000000 + 33333ull * k; }
 
 std::filesystem::path write_fixture(const std::string &name) {
-  const auto path = std::filesystem::temp_directory_path() / name;
+  const auto path = ::artrace::test::scratch_path(name);
   OniWriter w(path, {kW, kH, 30}, {kW, kH, 30}, 8000);
   std::vector<uint16_t> d(kW * kH);
   std::vector<uint8_t> c(kW * kH * 3);
@@ -145,7 +145,7 @@ TEST(Oni, WriterSeekTablesAndUndoChainPointAtTheFrames) {
 }
 
 TEST(Oni, AbandonedWriterLeavesNoFile) {
-  const auto path = std::filesystem::temp_directory_path() / "artrace_abandoned.oni";
+  const auto path = ::artrace::test::scratch_path("artrace_abandoned.oni");
   std::filesystem::remove(path);
   {
     OniWriter w(path, {kW, kH, 30}, {kW, kH, 30});
@@ -165,7 +165,7 @@ std::string read_bytes(const std::filesystem::path& p) {
 
 /// Reads every frame of a copy of `bytes`; returns the frames read, or the ParseError's text.
 std::string read_all(const std::string& name, const std::string& bytes, int* frames = nullptr, std::vector<std::string>* warnings = nullptr) {
-  const auto path = std::filesystem::temp_directory_path() / name;
+  const auto path = ::artrace::test::scratch_path(name);
   std::ofstream(path, std::ios::binary) << bytes;
   std::string error;
   try {

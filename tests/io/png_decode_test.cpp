@@ -19,7 +19,6 @@
 #include <utility>
 #include <vector>
 
-#include <unistd.h>
 
 namespace artrace::io {
 namespace {
@@ -234,7 +233,7 @@ TEST(PngDecode, DeclinesWhatItDoesNotTakeAndOpenCvAnswers) {
   }
   cases.push_back({"8-bit grey for depth", good});  // asked with kDepth below
 
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("artrace_png_" + std::to_string(::getpid()));
+  const std::filesystem::path dir = ::artrace::test::scratch_path("artrace_png");
   std::filesystem::create_directories(dir);
   for (const auto& [name, bytes] : cases) {
     const int flags = name == "8-bit grey for depth" ? kDepth : kColour;

@@ -8,10 +8,10 @@
 #include "artrace/io/parse_error.h"
 #include "artrace/io/recording.h"
 #include "../cli_util.h"
+#include "../test_util.h"
 
 #include <fstream>
 
-#include <unistd.h>
 
 namespace artrace::io {
 namespace {
@@ -21,11 +21,11 @@ constexpr int kW = 320, kH = 240;
 /// A synthetic recording of the demo room: `orbit_deg` of camera motion over `frames`, the
 /// Kinect-like depth model or exact depth, written as a TUM folder.
 std::filesystem::path room_recording(const std::string& name, int frames, double orbit_deg, bool noisy) {
-  // Two tests (two processes under ctest -j) may ask for the same recording at once: each writes
-  // its own folder and renames it into place, so a folder under `name` is always complete.
-  const auto dir = std::filesystem::temp_directory_path() / name;
+  // Made once a test process (its own scratch folder), then reused by its later calls; written
+  // under another name and renamed into place, so a folder under `name` is always complete.
+  const auto dir = ::artrace::test::scratch_path(name);
   if (std::filesystem::exists(dir / "rgb.txt")) return dir;
-  const auto part = std::filesystem::temp_directory_path() / (name + ".partial." + std::to_string(::getpid()));
+  const auto part = ::artrace::test::scratch_path(name + ".partial");
   std::filesystem::remove_all(part);
   const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
   SynthOptions o;
@@ -39,9 +39,7 @@ std::filesystem::path room_recording(const std::string& name, int frames, double
     auto w = make_recording_writer(part);
     synth.write(*w);
   }
-  std::error_code ec;
-  std::filesystem::rename(part, dir, ec);  // fails if another process put its folder there first
-  if (ec) std::filesystem::remove_all(part);
+  std::filesystem::rename(part, dir);
   return dir;
 }
 

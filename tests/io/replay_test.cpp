@@ -1,6 +1,7 @@
 // The replay viewer as a user runs it: under a virtual display (Xvfb) its view shows the overlay and
 // its keys pause, step, seek and switch views; without a display it says so and points to export.
 #include "../cli_util.h"
+#include "../test_util.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -32,7 +33,7 @@ class Replay : public ::testing::Test {
     if (!std::filesystem::exists(ARTRACE_BINARY)) GTEST_SKIP() << "the artrace program is not built (tools off)";
     // each test its own folder and X server: ctest runs them in parallel
     const std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    dir_ = std::filesystem::temp_directory_path() / ("artrace_replay_" + name);
+    dir_ = ::artrace::test::scratch_path("artrace_replay_" + name);
     std::filesystem::remove_all(dir_);
     scene_ = box_scene(dir_);
   }

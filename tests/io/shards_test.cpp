@@ -1,5 +1,6 @@
 // Sharded export, join and batch, run as a user runs them.
 #include "../cli_util.h"
+#include "../test_util.h"
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -43,7 +44,7 @@ int run_capture(const std::string& cmd, std::string& output, const std::filesyst
 
 /// A folder for a test, empty.
 std::filesystem::path fresh(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / name;
+  const auto dir = ::artrace::test::scratch_path(name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;

@@ -13,7 +13,7 @@ namespace {
 
 /// A wall (z = -5 plane) seen head-on by a camera at the origin looking down -z.
 AffScene wall_scene() {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_synth_wall";
+  const auto dir = ::artrace::test::scratch_path("artrace_synth_wall");
   std::filesystem::create_directories(dir);
   const auto p = dir / "wall.aff";
   std::ofstream(p) << "v\nfrom 0 0 0\nat 0 0 -1\nup 0 1 0\nangle 45\nhither 0.01\nresolution 64 48\n"
@@ -73,7 +73,7 @@ TEST(Synth, ConversionsRoundTrip) {
   const AffScene scene = wall_scene();
   SynthOptions o = small(4);
   o.orbit_deg = 20.0;
-  const auto tmp = std::filesystem::temp_directory_path();
+  const auto tmp = ::artrace::test::scratch_root();
   const auto a = tmp / "artrace_rt_a.oni", t = tmp / "artrace_rt_tum", b = tmp / "artrace_rt_b.oni";
   {
     Synthesizer synth(scene, o);

@@ -56,7 +56,7 @@ TEST(Tum, TrajectoryInterpolatesBetweenSamples) {
 
 /// A small sequence written here: values, association, poses at colour timestamps.
 TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_tum_ok";
+  const auto dir = ::artrace::test::scratch_path("artrace_tum_ok");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir / "rgb");
   std::filesystem::create_directories(dir / "depth");
@@ -121,7 +121,7 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
 /// that parse but make no camera (a focal length of 0 or 1e39, a principal point at 1e20, a size
 /// of 0 or 1e20, which was cast to int unchecked) are refused with the file, line and value named.
 TEST(Intrinsics, ValuesOutOfRangeNameFileLineAndValue) {
-  const auto dir = std::filesystem::temp_directory_path() / "artrace_intrinsics";
+  const auto dir = ::artrace::test::scratch_path("artrace_intrinsics");
   std::filesystem::create_directories(dir);
   const auto path = dir / "intrinsics.txt";
   std::ofstream(path) << "# fx fy cx cy width height\n\n500 510 319.5 239.5 640 480\n";
