@@ -147,7 +147,8 @@ void EmbreeBatch::restore() { std::memcpy(impl_->live.data, impl_->pristine.data
 
 const char* to_string(EmbreeQuality q) { return q == EmbreeQuality::kHigh ? "HIGH" : "MEDIUM"; }
 
-EmbreeReference::EmbreeReference(const std::vector<core::Triangle>& tris, int threads) : tris_(tris) {
+EmbreeReference::EmbreeReference(const std::vector<core::Triangle>& tris, int threads, bool robust)
+    : tris_(tris), robust_(robust) {
   const std::string config = "threads=" + std::to_string(threads);
   device_ = rtcNewDevice(config.c_str());
   if (!device_) throw std::runtime_error("Embree: cannot create a device");
@@ -168,6 +169,7 @@ void EmbreeReference::build(EmbreeQuality q) {
   scene = rtcNewScene(device_);
   const RTCBuildQuality quality = q == EmbreeQuality::kHigh ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM;
   rtcSetSceneBuildQuality(scene, quality);
+  if (robust_) rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
   RTCGeometry geom = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetGeometryBuildQuality(geom, quality);
   auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
@@ -184,6 +186,10 @@ void EmbreeReference::build(EmbreeQuality q) {
   rtcAttachGeometry(scene, geom);
   rtcReleaseGeometry(geom);
   rtcCommitScene(scene);
+}
+
+int EmbreeReference::scene_flags(EmbreeQuality q) const {
+  return static_cast<int>(rtcGetSceneFlags(scenes_[static_cast<int>(q)]));
 }
 
 namespace {

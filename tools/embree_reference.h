@@ -48,14 +48,18 @@ const char* to_string(EmbreeQuality q);
 
 class EmbreeReference {
  public:
-  /// One device of `threads` threads; a scene of each quality.
-  EmbreeReference(const std::vector<core::Triangle>& tris, int threads);
+  /// One device of `threads` threads; a scene of each quality. `robust`: the scenes in Embree's
+  /// robust mode (RTC_SCENE_FLAG_ROBUST: robust traversal, no optimisations that reduce arithmetic
+  /// accuracy), not its default.
+  EmbreeReference(const std::vector<core::Triangle>& tris, int threads, bool robust = false);
   ~EmbreeReference();
   EmbreeReference(const EmbreeReference&) = delete;
   EmbreeReference& operator=(const EmbreeReference&) = delete;
 
   /// (Re)builds the scene of quality `q`.
   void build(EmbreeQuality q);
+  /// The flags Embree reports for the scene of quality `q` (rtcGetSceneFlags).
+  int scene_flags(EmbreeQuality q) const;
   /// Closest hits of calls [first, last) of a batch through the scene of quality `q`; `coherent`
   /// chooses the context flag.
   void intersect(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
@@ -71,6 +75,7 @@ class EmbreeReference {
   void trace(EmbreeQuality q, EmbreeBatch& batch, size_t first, size_t last, bool coherent) const;
 
   const std::vector<core::Triangle>& tris_;
+  bool robust_;
   RTCDevice device_ = nullptr;
   RTCScene scenes_[2] = {nullptr, nullptr};  ///< by EmbreeQuality
 };

@@ -244,24 +244,43 @@ TEST(Export, RealOniRecordingThroughTheArPath) {
 /// bench-core against its Embree reference, as docs/benchmarks.md runs it: it completes (Embree's
 /// 8- and 16-wide calls fault on a valid mask not aligned as the packet), and Embree's camera-ray
 /// hits and shadow answers agree with ours, where they differ brute force finding none of ours
-/// wrong.
+/// wrong. In its default mode and, with --embree-robust, in its robust mode, each as Embree
+/// itself reports the scenes' flags.
 TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_bench_core_embree");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  for (const int lanes : {8, 16}) {
-    const auto json = dir / ("lanes" + std::to_string(lanes) + ".json");
+  {  // robust mode without the reference is refused by name, not ignored
+    const auto log = dir / "refused.txt";
+    EXPECT_NE(run(std::string(ARTRACE_BINARY) + " bench-core --scene " + (kRoot / "data/scenes/room.aff").string() +
+                  " --width 8 --height 8 --runs 1 --embree-robust > " + log.string() + " 2>&1"),
+              0);
+    std::ifstream in(log);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("--embree-robust needs --reference embree"), std::string::npos) << text;
+  }
+  constexpr int kRobustFlag = 1 << 2;  // RTC_SCENE_FLAG_ROBUST in Embree 3's rtcore_scene.h
+  const struct {
+    int lanes;
+    bool robust;
+  } runs[] = {{8, false}, {16, false}, {16, true}};
+  for (const auto& [lanes, robust] : runs) {
+    const auto json = dir / ("lanes" + std::to_string(lanes) + (robust ? "_robust" : "") + ".json");
     const auto log = dir / "log.txt";
     const int rc = run(std::string(ARTRACE_BINARY) + " bench-core --scene " + (kRoot / "data/scenes/room.aff").string() +
                        " --width 96 --height 64 --runs 1 --threads 2 --verify-rays 100 --lanes " + std::to_string(lanes) +
-                       " --reference embree --json " + json.string() + " > " + log.string() + " 2>&1");
+                       " --reference embree" + (robust ? " --embree-robust" : "") + " --json " + json.string() + " > " +
+                       log.string() + " 2>&1");
     std::ifstream in(log);
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (rc != 0 && text.find("this build has no Embree") != std::string::npos) GTEST_SKIP() << "built without Embree";
     ASSERT_EQ(rc, 0) << text;
     const nlohmann::json out = nlohmann::json::parse(std::ifstream(json));
     const nlohmann::json& e = out.at("embree");
+    EXPECT_EQ(e.at("robust").get<bool>(), robust);
+    for (const char* q : {"HIGH", "MEDIUM"})
+      EXPECT_EQ(e.at("scene_flags").at(q).get<int>() & kRobustFlag, robust ? kRobustFlag : 0) << q;
     EXPECT_GE(e.at("primary_agreement").get<double>(), 0.999) << "lanes " << lanes;
     EXPECT_EQ(e.at("shadow_disagreeing_lanes_wrong").at("artrace").get<size_t>(), 0u) << "lanes " << lanes;
     // and the reference answers its shadow rays too (Embree's test is not watertight: a few lanes
