@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <string>
@@ -55,6 +57,12 @@ inline const std::filesystem::path& scratch_root() {
 
 /// `name` (a file or folder) in scratch_root().
 inline std::filesystem::path scratch_path(const std::string& name) { return scratch_root() / name; }
+
+/// The whole of a file (a command's log, a written file), empty when it cannot be read.
+inline std::string read_file(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
 
 /// Skips the current test with a clear message when the shared scenes are not there.
 #define ARTRACE_REQUIRE_SHARED(rel)                                                                \

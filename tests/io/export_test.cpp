@@ -105,8 +105,7 @@ TEST(Cli, OutOfRangeOptionsAreRefusedByName) {
   const auto log = dir / "log.txt";
   for (const auto& [args, option] : cases) {
     EXPECT_NE(run(std::string(ARTRACE_BINARY) + " " + args + " > " + log.string() + " 2>&1"), 0) << args;
-    std::ifstream in(log);
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string text = ::artrace::test::read_file(log);
     EXPECT_NE(text.find(option + ": Value"), std::string::npos) << args << "\n" << text;
     EXPECT_NE(text.find("not in range"), std::string::npos) << args << "\n" << text;
   }
@@ -169,8 +168,7 @@ TEST(Export, DepthShiftAutoIsTheRecordingsOwnShift) {
       frames[shift].emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     }
   }
-  std::ifstream log(dir / "auto.log");
-  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  const std::string text = ::artrace::test::read_file(dir / "auto.log");
   EXPECT_NE(text.find("note: depth shift +1,+0 px"), std::string::npos) << text;
   for (size_t k = 0; k < 3; ++k) {
     EXPECT_TRUE(frames["auto"][k] == frames["1,0"][k]) << "frame " << k;
@@ -196,11 +194,9 @@ TEST(Track, DepthShiftAutoLinesTheDepthUpAndTracksCloser) {
                   out.string() + ".log"),
               0);
     drift[shift] = nlohmann::json::parse(std::ifstream(out.string() + ".json")).at("drift");
-    std::ifstream in(out.string() + ".txt");
-    poses[shift].assign((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    poses[shift] = ::artrace::test::read_file(out.string() + ".txt");
   }
-  std::ifstream log(dir / "auto.log");
-  const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+  const std::string text = ::artrace::test::read_file(dir / "auto.log");
   EXPECT_NE(text.find("note: depth shift +1,+0 px"), std::string::npos) << text;
   ASSERT_FALSE(poses["auto"].empty());
   EXPECT_EQ(poses["auto"], poses["1,0"]);
@@ -256,8 +252,7 @@ TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
     EXPECT_NE(run(std::string(ARTRACE_BINARY) + " bench-core --scene " + (kRoot / "data/scenes/room.aff").string() +
                   " --width 8 --height 8 --runs 1 --embree-robust > " + log.string() + " 2>&1"),
               0);
-    std::ifstream in(log);
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string text = ::artrace::test::read_file(log);
     EXPECT_NE(text.find("--embree-robust needs --reference embree"), std::string::npos) << text;
   }
   constexpr int kRobustFlag = 1 << 2;  // RTC_SCENE_FLAG_ROBUST in Embree 3's rtcore_scene.h
@@ -272,8 +267,7 @@ TEST(BenchCore, EmbreeReferenceRunsAndAgreesWithTheCore) {
                        " --width 96 --height 64 --runs 1 --threads 2 --verify-rays 100 --lanes " + std::to_string(lanes) +
                        " --reference embree" + (robust ? " --embree-robust" : "") + " --json " + json.string() + " > " +
                        log.string() + " 2>&1");
-    std::ifstream in(log);
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string text = ::artrace::test::read_file(log);
     if (rc != 0 && text.find("this build has no Embree") != std::string::npos) GTEST_SKIP() << "built without Embree";
     ASSERT_EQ(rc, 0) << text;
     const nlohmann::json out = nlohmann::json::parse(std::ifstream(json));

@@ -158,11 +158,6 @@ TEST(Oni, AbandonedWriterLeavesNoFile) {
   EXPECT_FALSE(std::filesystem::exists(path.string() + ".partial"));
 }
 
-std::string read_bytes(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
 /// Reads every frame of a copy of `bytes`; returns the frames read, or the ParseError's text.
 std::string read_all(const std::string& name, const std::string& bytes, int* frames = nullptr, std::vector<std::string>* warnings = nullptr) {
   const auto path = ::artrace::test::scratch_path(name);
@@ -185,7 +180,7 @@ std::string read_all(const std::string& name, const std::string& bytes, int* fra
 /// read up to its last whole record, with a warning.
 TEST(Oni, DamagedFilesAreRefusedWithTheFileNamed) {
   const auto good = write_fixture("artrace_damage_src.oni");
-  const std::string bytes = read_bytes(good);
+  const std::string bytes = ::artrace::test::read_file(good);
   std::filesystem::remove(good);
   struct Damage {
     const char* name;
@@ -389,7 +384,7 @@ TEST(OniCodecs, Yuv422DecodesPairsAndRefusesAnOddWidth) {
 /// file named, never a crash or a hang; a 16zT stream that ends early or a table that lies is named.
 TEST(OniReal, CorruptCompressedFramesAreRefusedWithTheByte) {
   ARTRACE_REQUIRE_SHARED("rgbd/oni-kinect1-tabletop-4f/Captured.oni");
-  const std::string bytes = read_bytes(shared_path);
+  const std::string bytes = ::artrace::test::read_file(shared_path);
   const OniContainer file(shared_path);
   const OniFrameRecord d0 = file.find(kOniDepth)->frames[0];
   // the 16zT stream of the first depth frame ends early: its last bytes become 0xE0 (no values)

@@ -37,8 +37,7 @@ std::vector<std::vector<char>> pngs(const std::filesystem::path& folder) {
 int run_capture(const std::string& cmd, std::string& output, const std::filesystem::path& dir) {
   const auto log = dir / "command.log";
   const int status = run(cmd + " > " + log.string() + " 2>&1");
-  std::ifstream in(log);
-  output.assign((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  output = ::artrace::test::read_file(log);
   return status;
 }
 
