@@ -75,9 +75,13 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
   }
   for (const GltfMesh& gm : model.meshes) {
     tinygltf::Mesh mesh;
-    // one primitive per material, vertices unshared (flat facets)
+    // one primitive per material, vertices unshared: flat facets, or the mesh's vertex normals
+    // (indexed as its positions) on every corner
+    const bool normals = !gm.normals.empty();
+    if (normals && gm.indices.size() != gm.tris.size())
+      throw std::invalid_argument("write_gltf: a mesh with normals needs an index triple per triangle");
     for (size_t mat = 0; mat < model.materials.size(); ++mat) {
-      std::vector<float> pos, weights;
+      std::vector<float> pos, nrm, weights;
       std::vector<uint16_t> joints;
       glm::vec3 lo(INFINITY), hi(-INFINITY);
       for (size_t t = 0; t < gm.tris.size(); ++t) {
@@ -87,6 +91,10 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
           pos.insert(pos.end(), {v.x, v.y, v.z});
           lo = glm::min(lo, v);
           hi = glm::max(hi, v);
+          if (normals) {
+            const glm::vec3 n = gm.normals.at(gm.indices[t][c]);
+            nrm.insert(nrm.end(), {n.x, n.y, n.z});
+          }
           if (gm.skinned()) {
             const uint32_t i = gm.indices[t][c];
             // the first influence set (the project's models have one)
@@ -103,6 +111,10 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
       p.mode = TINYGLTF_MODE_TRIANGLES;
       p.attributes["POSITION"] = add_accessor(m, pos.data(), pos.size() * 4, pos.size() / 3, TINYGLTF_TYPE_VEC3,
                                               TINYGLTF_COMPONENT_TYPE_FLOAT, {lo.x, lo.y, lo.z}, {hi.x, hi.y, hi.z});
+      if (normals) {
+        p.attributes["NORMAL"] = add_accessor(m, nrm.data(), nrm.size() * 4, nrm.size() / 3, TINYGLTF_TYPE_VEC3,
+                                              TINYGLTF_COMPONENT_TYPE_FLOAT);
+      }
       if (gm.skinned()) {
         p.attributes["JOINTS_0"] = add_accessor(m, joints.data(), joints.size() * 2, joints.size() / 4, TINYGLTF_TYPE_VEC4,
                                                 TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT);
@@ -207,16 +219,34 @@ GltfModel make_glass_sphere(float radius) {
   m.materials[1].roughness = 0.0f;
   m.materials[1].transmission = 1.0f;
   m.materials[1].ior = 1.5f;
+  // a UV sphere with the sphere's own normals at its vertices, so that its shading (and above all
+  // its refraction, which magnifies any kink) is smooth rather than faceted
   GltfMesh mesh;
   constexpr int kRings = 16, kSegments = 32;
-  auto p = [&](int i, int j) {
-    const float th = 3.14159265f * i / kRings, ph = 6.2831853f * j / kSegments;
-    return radius * glm::vec3(std::sin(th) * std::cos(ph), std::cos(th), std::sin(th) * std::sin(ph)) + glm::vec3(0, radius, 0);
+  const glm::vec3 centre(0.0f, radius, 0.0f);
+  auto vertex = [&](int i, int j) {  // ring i (0: top pole), segment j (kSegments: seam, = 0)
+    return static_cast<uint32_t>(i * (kSegments + 1) + j);
+  };
+  for (int i = 0; i <= kRings; ++i) {
+    for (int j = 0; j <= kSegments; ++j) {
+      const float th = 3.14159265f * i / kRings, ph = 6.2831853f * (j % kSegments) / kSegments;
+      // the poles exactly on the axis (sin of the float nearest pi is not 0): a point, no hole
+      const bool pole = i == 0 || i == kRings;
+      const float ring = pole ? 0.0f : std::sin(th), y = i == 0 ? 1.0f : i == kRings ? -1.0f : std::cos(th);
+      const glm::vec3 n(ring * std::cos(ph), y, ring * std::sin(ph));
+      mesh.positions.push_back(centre + radius * n);
+      mesh.normals.push_back(n);
+    }
+  }
+  auto add = [&](uint32_t a, uint32_t b, uint32_t c) {
+    mesh.indices.emplace_back(a, b, c);
+    mesh.tris.push_back({mesh.positions[a], mesh.positions[b], mesh.positions[c]});
   };
   for (int i = 0; i < kRings; ++i) {
     for (int j = 0; j < kSegments; ++j) {
-      if (i > 0) mesh.tris.push_back({p(i, j), p(i, j + 1), p(i + 1, j + 1)});
-      if (i + 1 < kRings) mesh.tris.push_back({p(i, j), p(i + 1, j + 1), p(i + 1, j)});
+      // the poles' rings are points: one triangle a segment there
+      if (i > 0) add(vertex(i, j), vertex(i, j + 1), vertex(i + 1, j + 1));
+      if (i + 1 < kRings) add(vertex(i, j), vertex(i + 1, j + 1), vertex(i + 1, j));
     }
   }
   mesh.material.assign(mesh.tris.size(), 1);

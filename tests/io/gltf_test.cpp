@@ -3,7 +3,11 @@
 #include "artrace/io/parse_error.h"
 #include "../test_util.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <fstream>
+#include <map>
 
 namespace artrace::io {
 namespace {
@@ -301,6 +305,91 @@ TEST(ArRuntime, GlassOfEveryKindLetsShadowRaysThrough) {
     EXPECT_GT(trans[2], 0.0f) << "skinned glass tube";
     EXPECT_LT(trans[2], t) << "skinned glass tube: at least one wall";
   }
+  std::filesystem::remove_all(dir);
+}
+
+/// The shipped glass sphere carries the sphere's own normals: read back from the file, every
+/// vertex's normal is the unit vector from the centre to it (the analytic oracle), and the mesh is
+/// closed (every edge, by position, shared by exactly two triangles: no crack at the seam or the
+/// poles, through which refraction rays would leak).
+TEST(Gltf, GlassSphereHasTheSpheresNormalsAndNoCracks) {
+  const auto dir = ::artrace::test::scratch_path("artrace_gltf_sphere");
+  const float r = 0.1f;
+  write_gltf(make_glass_sphere(r), dir / "glass.gltf");
+  const GltfModel m = load_gltf(dir / "glass.gltf");
+  ASSERT_EQ(m.meshes.size(), 1u);
+  const GltfMesh& g = m.meshes[0];
+  ASSERT_EQ(g.normals.size(), g.positions.size()) << "no NORMAL attribute: flat facets";
+  const glm::vec3 centre(0.0f, r, 0.0f);
+  for (size_t i = 0; i < g.positions.size(); ++i) {
+    EXPECT_NEAR(glm::length(g.positions[i] - centre), r, 1e-6f) << "vertex " << i;
+    const glm::vec3 expected = glm::normalize(g.positions[i] - centre);
+    EXPECT_LT(glm::length(g.normals[i] - expected), 1e-5f) << "vertex " << i;
+  }
+  std::map<std::pair<std::array<float, 3>, std::array<float, 3>>, int> edges;
+  auto key = [](const glm::vec3& v) { return std::array<float, 3>{v.x, v.y, v.z}; };
+  for (const core::Triangle& t : g.tris) {
+    const glm::vec3 v[3] = {t.v0, t.v1, t.v2};
+    ASSERT_GT(glm::length(t.geometric_normal()), 0.0f) << "a degenerate triangle";
+    for (int k = 0; k < 3; ++k) {
+      auto a = key(v[k]), b = key(v[(k + 1) % 3]);
+      if (b < a) std::swap(a, b);
+      ++edges[{a, b}];
+    }
+  }
+  for (const auto& [edge, count] : edges) ASSERT_EQ(count, 2) << "an edge of " << count << " triangles";
+  // the copy in data/models is what make-models writes now (radius 0.12 m)
+  const GltfModel shipped = load_gltf(std::filesystem::path(ARTRACE_SOURCE_DIR) / "data/models/glass_sphere.gltf");
+  const GltfMesh made = load_gltf((write_gltf(make_glass_sphere(0.12f), dir / "made.gltf"), dir / "made.gltf")).meshes.at(0);
+  ASSERT_EQ(shipped.meshes.size(), 1u);
+  EXPECT_EQ(shipped.meshes[0].positions, made.positions) << "data/models/glass_sphere.gltf is stale: artrace make-models data/models";
+  EXPECT_EQ(shipped.meshes[0].normals, made.normals) << "data/models/glass_sphere.gltf is stale: artrace make-models data/models";
+  // normals need the corners' vertex numbers
+  GltfModel unindexed = make_glass_sphere(r);
+  unindexed.meshes[0].indices.clear();
+  EXPECT_THROW(write_gltf(unindexed, dir / "bad.gltf"), std::invalid_argument);
+  std::filesystem::remove_all(dir);
+}
+
+/// Through ArRuntime, what the compositor shades and refracts with: at hits all over the glass
+/// sphere the shading normal is the sphere's (within 0.2 degrees), where the facets' own normals
+/// are up to several degrees off it.
+TEST(ArRuntime, GlassSphereShadesWithTheSpheresNormal) {
+  const auto dir = ::artrace::test::scratch_path("artrace_ar_sphere");
+  const float r = 0.12f;
+  write_gltf(make_glass_sphere(r), dir / "glass.gltf");
+  std::ofstream(dir / "scene.json") << R"({ "models": [ { "file": "glass.gltf", "position": [0.5, -0.2, 2.0], "scale": 1.5 } ] })";
+  const ArSceneFile file = load_ar_scene(dir / "scene.json");
+  ArRuntime rt(file);
+  rt.update(0.0);
+  const glm::vec3 centre = glm::vec3(0.5f, -0.2f, 2.0f) + 1.5f * glm::vec3(0.0f, r, 0.0f);
+  const float radius = 1.5f * r;
+  float worst_shading = 0.0f, worst_facet = 0.0f;
+  int hits = 0;
+  for (int iy = -9; iy <= 9; ++iy) {
+    for (int ix = -9; ix <= 9; ++ix) {
+      // rays from a point in front towards a grid over the sphere's disc
+      const glm::vec3 target = centre + radius * glm::vec3(ix / 10.0f, iy / 10.0f, 0.0f);
+      const core::Ray ray{glm::vec3(0.2f, 0.1f, 0.0f), target - glm::vec3(0.2f, 0.1f, 0.0f)};
+      const core::Hit h = rt.scene().intersect(ray);
+      if (!h.valid()) continue;
+      ++hits;
+      ar::SurfaceQuery q(h);
+      q.dir = ray.dir;
+      const ar::VirtualMaterial mat = rt.material(q);
+      ASSERT_NE(mat.normal, glm::vec3(0.0f)) << "no shading normal: the facets' own";
+      const glm::vec3 p = ray.org + h.t * ray.dir;
+      const glm::vec3 exact = glm::normalize(p - centre);
+      auto degrees = [&](const glm::vec3& n) {
+        return glm::degrees(std::acos(std::clamp(std::fabs(glm::dot(glm::normalize(n), exact)), 0.0f, 1.0f)));
+      };
+      worst_shading = std::max(worst_shading, degrees(mat.normal));
+      worst_facet = std::max(worst_facet, degrees(rt.scene().world_triangle(h).geometric_normal()));
+    }
+  }
+  EXPECT_GT(hits, 200);
+  EXPECT_LT(worst_shading, 0.2f);
+  EXPECT_GT(worst_facet, 2.0f) << "the facets differ from the sphere: the check above can tell";
   std::filesystem::remove_all(dir);
 }
 

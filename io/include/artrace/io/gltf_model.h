@@ -173,7 +173,7 @@ namespace artrace::io {
 void write_gltf(const GltfModel& model, const std::filesystem::path& path);
 
 /// The models the project ships in data/models: a box that turns about y (node animation, 4 s),
-/// and a glass sphere. `radius`/`size` in metres.
+/// and a glass sphere with its vertex normals (smooth, not faceted). `radius`/`size` in metres.
 GltfModel make_spinning_box(float size, const glm::vec3& color);
 GltfModel make_glass_sphere(float radius);
 /// A skinned square tube of `length` along +y on two joints (root at the origin, elbow half way up),
