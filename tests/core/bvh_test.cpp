@@ -111,6 +111,83 @@ TEST(Bvh, RestructureRebuildsDegenerateSubtrees) {
   EXPECT_EQ(bvh.restructure(tris), 0u);
 }
 
+/// The tree checked node by node against its own triangles: every node's box is the box of its
+/// triangles, to the bit, and every inner node splits along the widest axis of its triangles'
+/// centroids (both worked out here from the triangles): after a build, and after a refit and a
+/// restructure moved them, once the nodes they left unbuilt are split again (the nodes of `kept`,
+/// split before the move and kept by it, keep their axis).
+size_t bad_nodes(const Bvh& bvh, const std::vector<bool>& kept = {}) {
+  const BvhView v = bvh.view();
+  size_t bad = 0;
+  std::vector<uint32_t> stack{0};
+  while (!stack.empty()) {
+    const uint32_t index = stack.back();
+    const BvhNode& n = v.nodes[index];
+    stack.pop_back();
+    Aabb box, cb;
+    for (uint32_t i = n.begin; i < n.end; ++i) {
+      const Triangle& t = v.tris[v.prim_refs[i]];
+      box.extend(Aabb::of(t));
+      cb.extend((t.v0 + t.v1 + t.v2) * (1.0f / 3.0f));
+    }
+    if (box.lo != n.bounds.lo || box.hi != n.bounds.hi) ++bad;
+    if (n.split == 0) continue;
+    const glm::vec3 e = cb.extent();
+    const int widest = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+    if (e[widest] > 0.0f && n.axis != widest && !(index < kept.size() && kept[index])) ++bad;
+    stack.push_back(2 * n.split);
+    stack.push_back(2 * n.split + 1);
+  }
+  return bad;
+}
+
+/// The node slots split so far (2N slots; one thread, so no slot is half way).
+std::vector<bool> built_nodes(const Bvh& bvh) {
+  std::vector<bool> built(2 * bvh.triangles().size());
+  for (size_t i = 0; i < built.size(); ++i) built[i] = bvh.view().state[i].load() != 0;
+  return built;
+}
+
+TEST(Bvh, NodesHoldTheirTrianglesBoxAndSplitTheirWidestAxis) {
+  std::mt19937 rng(36);
+  auto tris = random_soup(rng, 6000, 0.2f);
+  Bvh bvh(tris, true);
+  EXPECT_EQ(bad_nodes(bvh), 0u) << "built";
+  // a few triangles move a little way (a tenth of the scene): the small subtrees they leave
+  // degenerate, and restructure resets those alone; split again, they must split by where their
+  // triangles are now
+  std::uniform_int_distribution<size_t> any(0, tris.size() - 1);
+  std::uniform_int_distribution<int> axis(0, 2);
+  for (int round = 0; round < 3; ++round) {
+    for (int k = 0; k < 30; ++k) {
+      glm::vec3 d(0.0f);
+      d[axis(rng)] = 1.0f;
+      Triangle& t = tris[any(rng)];
+      t.v0 += d;
+      t.v1 += d;
+      t.v2 += d;
+    }
+    EXPECT_GT(bvh.restructure(tris), 0u);
+    const std::vector<bool> kept = built_nodes(bvh);
+    bvh.build_all();
+    EXPECT_EQ(bad_nodes(bvh, kept), 0u) << "restructured";
+    EXPECT_EQ(mismatches(bvh, tris, random_rays(rng, 2000)), 0u);
+  }
+  // a refit of a tree half built: the nodes no ray reached yet split by the new shape
+  Bvh lazy(tris);
+  for (const Ray& r : random_rays(rng, 30)) lazy.intersect(r);
+  const std::vector<bool> split_before = built_nodes(lazy);
+  EXPECT_LT(lazy.stats().nodes_built * 4, split_before.size()) << "most of the tree unbuilt";
+  for (auto& t : tris) {
+    t.v0 *= glm::vec3(1.0f, 6.0f, 0.2f);
+    t.v1 *= glm::vec3(1.0f, 6.0f, 0.2f);
+    t.v2 *= glm::vec3(1.0f, 6.0f, 0.2f);
+  }
+  lazy.refit(tris);
+  lazy.build_all();
+  EXPECT_EQ(bad_nodes(lazy, split_before), 0u) << "refitted half built";
+}
+
 TEST(Bvh, PacketsEqualSingleRaysOnEveryKernel) {
   std::mt19937 rng(36);
   const auto tris = random_soup(rng, 3000, 0.5f);
