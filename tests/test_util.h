@@ -7,6 +7,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <iterator>
 #include <limits>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -62,6 +64,22 @@ inline std::filesystem::path scratch_path(const std::string& name) { return scra
 inline std::string read_file(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+/// The bytes of every .png of a folder (an export's frame_*.png), in name order, so frame order.
+/// Throws for an empty or unreadable one, so that frames compared are never two empty strings.
+inline std::vector<std::string> read_pngs(const std::filesystem::path& folder) {
+  std::vector<std::filesystem::path> files;
+  for (const auto& e : std::filesystem::directory_iterator(folder)) {
+    if (e.path().extension() == ".png") files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  std::vector<std::string> out;
+  for (const auto& f : files) {
+    out.push_back(read_file(f));
+    if (out.back().empty()) throw std::runtime_error(f.string() + ": empty or unreadable");
+  }
+  return out;
 }
 
 /// Skips the current test with a clear message when the shared scenes are not there.

@@ -170,7 +170,7 @@ void add_export_command(CLI::App& app) {
   models->add_option("folder", *dir, "where to write them")->required();
   models->callback([dir] {
     io::write_gltf(io::make_spinning_box(0.2f, {0.85f, 0.25f, 0.1f}), std::filesystem::path(*dir) / "spinning_box.gltf");
-    io::write_gltf(io::make_glass_sphere(0.12f), std::filesystem::path(*dir) / "glass_sphere.gltf");
+    io::write_gltf(io::make_glass_sphere(io::kShippedGlassSphereRadius), std::filesystem::path(*dir) / "glass_sphere.gltf");
     io::write_gltf(io::make_bending_tube(0.6f, 0.08f, {0.2f, 0.7f, 0.3f}), std::filesystem::path(*dir) / "bending_tube.gltf");
     std::printf("%s: spinning_box.gltf, glass_sphere.gltf, bending_tube.gltf\n", dir->c_str());
   });

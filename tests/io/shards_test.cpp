@@ -18,20 +18,7 @@ const std::string kDemo = (kRoot / "data/ar/demo.json").string();
 
 std::string bin() { return std::string(ARTRACE_BINARY); }
 
-/// The bytes of every frame_*.png of a folder, in frame order (shard.json left out).
-std::vector<std::vector<char>> pngs(const std::filesystem::path& folder) {
-  std::vector<std::filesystem::path> files;
-  for (const auto& e : std::filesystem::directory_iterator(folder)) {
-    if (e.path().extension() == ".png") files.push_back(e.path());
-  }
-  std::sort(files.begin(), files.end());
-  std::vector<std::vector<char>> out;
-  for (const auto& f : files) {
-    std::ifstream in(f, std::ios::binary);
-    out.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  }
-  return out;
-}
+using ::artrace::test::read_pngs;
 
 /// Runs a command; returns its exit status and what it printed (stdout and stderr).
 int run_capture(const std::string& cmd, std::string& output, const std::filesystem::path& dir) {
@@ -66,7 +53,7 @@ TEST(Shards, ShardsJoinedAreTheWholeExportBitForBit) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = fresh("artrace_shards_whole");
   ASSERT_EQ(run(export_cmd(dir / "whole") + " > /dev/null"), 0);
-  const auto whole = pngs(dir / "whole");
+  const auto whole = read_pngs(dir / "whole");
   ASSERT_EQ(whole.size(), 30u) << "the bundled recording has 30 frames";
   // three shards, exported out of order, each from a fresh process
   for (const std::string r : {"20:30", "0:11", "11:20"}) {
@@ -74,7 +61,7 @@ TEST(Shards, ShardsJoinedAreTheWholeExportBitForBit) {
   }
   const std::string shards = (dir / "shard_0").string() + " " + (dir / "shard_20").string() + " " + (dir / "shard_11").string();
   ASSERT_EQ(run(bin() + " join " + shards + " -o " + (dir / "joined").string() + " -q > /dev/null"), 0);
-  const auto joined = pngs(dir / "joined");
+  const auto joined = read_pngs(dir / "joined");
   ASSERT_EQ(joined.size(), whole.size());
   for (size_t k = 0; k < whole.size(); ++k) EXPECT_TRUE(joined[k] == whole[k]) << "frame " << k;
   // and encoded once into a clip with every frame
@@ -170,7 +157,7 @@ TEST(Shards, JoinRefusesAMissingShardNamingTheFrames) {
   expect_nothing_written(dir / "frames");
   // unless the range is given
   EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " --frames 0:10 -o " + (dir / "frames").string(), out, dir), 0) << out;
-  EXPECT_EQ(pngs(dir / "frames").size(), 10u);
+  EXPECT_EQ(read_pngs(dir / "frames").size(), 10u);
   std::filesystem::remove_all(dir);
 }
 
@@ -233,7 +220,7 @@ TEST(Batch, ManifestJobsRunSideBySideAndJoin) {
   ASSERT_EQ(run(bin() + " join " + (dir / "out/a").string() + " " + (dir / "out/b").string() + " --frames 0:12 -o " +
                 (dir / "joined").string() + " -q > /dev/null"),
             0);
-  EXPECT_TRUE(pngs(dir / "joined") == pngs(dir / "whole"));
+  EXPECT_TRUE(read_pngs(dir / "joined") == read_pngs(dir / "whole"));
   EXPECT_TRUE(std::filesystem::exists(dir / "out/c.mp4"));
   // one entry, as an array task runs it; a done one is skipped
   ASSERT_EQ(run_capture(bin() + " batch " + (dir / "jobs.json").string() + " --index 1 --skip-done", out, dir), 0) << out;

@@ -176,6 +176,8 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path);
 /// and a glass sphere with its vertex normals (smooth, not faceted). `radius`/`size` in metres.
 GltfModel make_spinning_box(float size, const glm::vec3& color);
 GltfModel make_glass_sphere(float radius);
+/// The radius of data/models/glass_sphere.gltf, as make-models writes it.
+inline constexpr float kShippedGlassSphereRadius = 0.12f;
 /// A skinned square tube of `length` along +y on two joints (root at the origin, elbow half way up),
 /// weights blending over the middle third; animation "bend" turns the elbow about z to 90 degrees
 /// and back in 2 s.
