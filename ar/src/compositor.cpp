@@ -1035,7 +1035,8 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
 
   // the real depth: the sensor's, cleaned where the fused room or a support plane knows the surface
   auto td = std::chrono::steady_clock::now();
-  const OcclusionOptions& oo = opt.occlusion_options;
+  OcclusionOptions oo = opt.occlusion_options;
+  oo.threads = opt.threads;
   const int margin = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
   thread_local DepthImage cleaned;
   thread_local std::vector<glm::vec3> real_normals;
@@ -1069,7 +1070,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
       cropped.width = area.x1 - area.x0;
       cropped.height = area.y1 - area.y0;
       cropped.depth_m = crop(real_depth->depth_m, w, area);
-      const DepthImage f = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px);
+      const DepthImage f = fill_depth_holes(cropped, oo.fill_radius, oo.fill_passes, oo.max_hole_px, oo.threads);
       for (int y = area.y0; y < area.y1; ++y) {
         std::copy_n(&f.depth_m[static_cast<size_t>(y - area.y0) * cropped.width], cropped.width, &filled.depth_m[static_cast<size_t>(y) * w + area.x0]);
       }

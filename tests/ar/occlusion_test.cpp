@@ -361,5 +361,95 @@ TEST(Occlusion, HolesAtASilhouetteAreFilledFromTheFarSide) {
   }
 }
 
+/// fill_depth_holes by its definition, written plainly: each hole (4-connected pixels without a
+/// reading) found by a flood fill and kept when it has at most `max_hole` pixels; each pass
+/// copies the whole map and gives every kept pixel still empty the value at index 3/4 of the
+/// sorted valid depths in its window.
+DepthImage fill_by_definition(const DepthImage& d, int radius, int passes, int max_hole) {
+  const int w = d.width, h = d.height;
+  std::vector<int> label(d.depth_m.size(), -1);
+  std::vector<int> size;
+  for (int start = 0; start < w * h; ++start) {
+    if (d.depth_m[start] > 0.0f || label[start] >= 0) continue;
+    const int id = static_cast<int>(size.size());
+    size.push_back(0);
+    std::vector<int> stack{start};
+    label[start] = id;
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      ++size[id];
+      const int x = i % w, y = i / w;
+      for (const auto& [nx, ny] : {std::pair{x - 1, y}, {x + 1, y}, {x, y - 1}, {x, y + 1}}) {
+        if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+        const int j = ny * w + nx;
+        if (d.depth_m[j] > 0.0f || label[j] >= 0) continue;
+        label[j] = id;
+        stack.push_back(j);
+      }
+    }
+  }
+  DepthImage cur = d;
+  for (int pass = 0; pass < passes; ++pass) {
+    DepthImage next = cur;
+    for (int i = 0; i < w * h; ++i) {
+      if (cur.depth_m[i] > 0.0f || size[label[i]] > max_hole) continue;
+      std::vector<float> v;
+      for (int y = i / w - radius; y <= i / w + radius; ++y) {
+        for (int x = i % w - radius; x <= i % w + radius; ++x) {
+          if (x >= 0 && y >= 0 && x < w && y < h && cur.depth_m[y * w + x] > 0.0f) v.push_back(cur.depth_m[y * w + x]);
+        }
+      }
+      std::sort(v.begin(), v.end());
+      if (!v.empty()) next.depth_m[i] = v[v.size() * 3 / 4];
+    }
+    cur = next;
+  }
+  return cur;
+}
+
+TEST(Occlusion, HoleFillingMatchesItsDefinitionForAnyThreadCount) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  constexpr int w = 160, h = 120;
+  int filled_somewhere = 0, left_somewhere = 0;
+  for (int round = 0; round < 6; ++round) {
+    DepthImage d;
+    d.width = w;
+    d.height = h;
+    d.depth_m.resize(w * h);
+    for (int i = 0; i < w * h; ++i) d.depth_m[i] = 0.5f + 3.0f * u(rng);
+    // holes of every size and shape: speckle, random rectangles (which merge into larger, ragged
+    // holes), a few touching the border, and readings that are not depths (negative, NaN)
+    for (int k = 0; k < 300; ++k) d.depth_m[static_cast<int>(u(rng) * (w * h - 1))] = 0.0f;
+    for (int k = 0; k < 25 + 10 * round; ++k) {
+      const int x0 = static_cast<int>(u(rng) * w), y0 = static_cast<int>(u(rng) * h);
+      const int rw = 1 + static_cast<int>(u(rng) * (round < 3 ? 6 : 20)), rh = 1 + static_cast<int>(u(rng) * 8);
+      for (int y = y0; y < std::min(h, y0 + rh); ++y)
+        for (int x = x0; x < std::min(w, x0 + rw); ++x) d.depth_m[y * w + x] = 0.0f;
+    }
+    d.depth_m[5 * w + 7] = -1.0f;
+    d.depth_m[9 * w + 100] = std::numeric_limits<float>::quiet_NaN();
+    const int radius = 1 + round % 3, passes = 2 + round % 4, max_hole = round == 5 ? 1000000 : 16 + 24 * round;
+    const DepthImage want = fill_by_definition(d, radius, passes, max_hole);
+    for (const int threads : {1, 2, 3}) {
+      const DepthImage got = fill_depth_holes(d, radius, passes, max_hole, threads);
+      ASSERT_EQ(got.depth_m.size(), want.depth_m.size());
+      for (int i = 0; i < w * h; ++i) {
+        // bit for bit (both NaN where the input's NaN stays)
+        ASSERT_TRUE(got.depth_m[i] == want.depth_m[i] || (std::isnan(got.depth_m[i]) && std::isnan(want.depth_m[i])))
+            << "round " << round << ", " << threads << " threads, pixel " << i % w << "," << i / w << ": " << got.depth_m[i]
+            << " against " << want.depth_m[i];
+      }
+    }
+    for (int i = 0; i < w * h; ++i) {
+      filled_somewhere += !(d.depth_m[i] > 0.0f) && want.depth_m[i] > 0.0f;
+      left_somewhere += !(want.depth_m[i] > 0.0f);
+    }
+  }
+  EXPECT_GT(filled_somewhere, 1000) << "holes filled";
+  EXPECT_GT(left_somewhere, 1000) << "holes left: too large, or out of reach of the passes";
+}
+
 }  // namespace
 }  // namespace artrace::ar

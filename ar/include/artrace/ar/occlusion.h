@@ -32,11 +32,15 @@ struct OcclusionOptions {
   int guide_radius = 3;
   double guide_sigma_color = 20.0;  ///< in 8-bit colour units
   double guide_sigma_space = 1.5;   ///< in pixels
+  int threads = 0;  ///< workers for the hole filling's passes and the refinement (0: every core); the result is the same for any count
 };
 
 /// Fills holes (0) of a depth map from the far side of their valid neighbours; connected holes of
-/// more than `max_hole_px` pixels stay 0.
-DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px);
+/// more than `max_hole_px` pixels stay 0. Each of the `passes` gives every hole pixel with valid
+/// depths in its (2 radius + 1)^2 window the upper quartile of them (the value at index 3/4 of
+/// their count, sorted), from the depths the pass began with. On `threads` workers (0: every
+/// core); the result is the same for any count.
+DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px, int threads = 0);
 
 /// Visibility of the virtual surface at each pixel, 0 (hidden by the real scene) .. 1 (in front).
 /// `virtual_depth_m` is the camera-space depth of the virtual surface per pixel (+inf where there
