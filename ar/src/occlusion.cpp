@@ -31,6 +31,7 @@ void for_pieces(size_t n, size_t piece, int threads, const std::function<void(si
 DepthImage fill_depth_holes(const DepthImage& depth, int radius, int passes, int max_hole_px, int threads) {
   DepthImage cur = depth;
   const int w = depth.width, h = depth.height;
+  if (depth.empty()) return cur;
   // Only small holes are filled: a large region without readings (beyond the sensor's range, a
   // window, a black surface) says nothing about what is there, and filling it from its rim would
   // grow whatever surrounds it. `todo` lists the small holes' pixels. The holes are found as runs

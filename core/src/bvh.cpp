@@ -11,7 +11,7 @@
 namespace artrace::core {
 namespace {
 
-enum : uint8_t { kUnbuilt = 0, kBuilding = 1, kBuilt = 2 };
+constexpr uint8_t kUnbuilt = kBvhUnbuilt, kBuilding = kBvhBuilding, kBuilt = kBvhBuilt;
 
 constexpr int kBins = 16;
 constexpr uint32_t kMaxLeafSize = 4;

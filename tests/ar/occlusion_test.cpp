@@ -447,6 +447,12 @@ TEST(Occlusion, HoleFillingMatchesItsDefinitionForAnyThreadCount) {
       left_somewhere += !(want.depth_m[i] > 0.0f);
     }
   }
+  for (const auto& [ew, eh] : {std::pair{0, 5}, {5, 0}, {0, 0}}) {
+    DepthImage empty;
+    empty.width = ew;
+    empty.height = eh;
+    EXPECT_TRUE(fill_depth_holes(empty, 2, 4, 64).depth_m.empty()) << ew << "x" << eh;
+  }
   EXPECT_GT(filled_somewhere, 1000) << "holes filled";
   EXPECT_GT(left_somewhere, 1000) << "holes left: too large, or out of reach of the passes";
 }

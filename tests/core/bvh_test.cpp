@@ -141,10 +141,10 @@ size_t bad_nodes(const Bvh& bvh, const std::vector<bool>& kept = {}) {
   return bad;
 }
 
-/// The node slots split so far (2N slots; one thread, so no slot is half way).
+/// The node slots split so far (2N slots; one thread, so none is being split).
 std::vector<bool> built_nodes(const Bvh& bvh) {
   std::vector<bool> built(2 * bvh.triangles().size());
-  for (size_t i = 0; i < built.size(); ++i) built[i] = bvh.view().state[i].load() != 0;
+  for (size_t i = 0; i < built.size(); ++i) built[i] = bvh.view().state[i].load() == kBvhBuilt;
   return built;
 }
 

@@ -39,7 +39,12 @@ struct BvhNode {
 };
 static_assert(sizeof(BvhNode) == 40, "BVH node layout");
 
-/// What the traversal kernels read. `ensure_built` splits node i if no ray reached it before.
+/// A node slot's state in BvhView::state: not split yet, being split by one thread, split (its
+/// children, or its being a leaf, may be read).
+enum BvhNodeState : uint8_t { kBvhUnbuilt = 0, kBvhBuilding = 1, kBvhBuilt = 2 };
+
+/// What the traversal kernels read. `ensure_built` splits node i if no ray reached it before
+/// (state[i] is not kBvhBuilt).
 struct BvhView {
   BvhNode* nodes;
   const uint32_t* prim_refs;
