@@ -159,7 +159,7 @@ std::vector<float> occlusion_alpha_filled(const DepthImage& filled, const ColorI
   // channel's difference and one per offset, each from a table, instead of an exp a neighbour.
   double channel_w[256];
   for (int d = 0; d < 256; ++d) channel_w[d] = std::exp(-static_cast<double>(d * d) * inv_c);
-  const int side = 2 * r + 1;
+  const int side = 2 * std::max(r, 0) + 1;  // a negative radius leaves every window empty
   std::vector<double> offset_w(static_cast<size_t>(side) * side);
   for (int dy = -r; dy <= r; ++dy) {
     for (int dx = -r; dx <= r; ++dx) offset_w[static_cast<size_t>(dy + r) * side + (dx + r)] = std::exp(-static_cast<double>(dx * dx + dy * dy) * inv_s);
