@@ -1037,7 +1037,12 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   auto td = std::chrono::steady_clock::now();
   OcclusionOptions oo = opt.occlusion_options;
   oo.threads = opt.threads;
+  // how far around the pixels it decides the occlusion reads: the hole filling's reach and the
+  // refinement's window, and a few pixels more
   const int margin = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
+  auto grow = [&](const Rect& r) {  // r widened by the margin, inside the image
+    return r.empty() ? r : Rect{std::max(0, r.x0 - margin), std::max(0, r.y0 - margin), std::min(w, r.x1 + margin), std::min(h, r.y1 + margin)};
+  };
   thread_local DepthImage cleaned;
   thread_local std::vector<glm::vec3> real_normals;
   const DepthImage* real_depth = &frame.depth;
@@ -1057,10 +1062,6 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   td = std::chrono::steady_clock::now();
   thread_local DepthImage filled;
   if (have_depth) {
-    const int mf = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
-    auto grow = [&](const Rect& r) {
-      return r.empty() ? r : Rect{std::max(0, r.x0 - mf), std::max(0, r.y0 - mf), std::min(w, r.x1 + mf), std::min(h, r.y1 + mf)};
-    };
     Rect area = grow(opt.occlusion ? Rect{x0, y0, x1, y1} : Rect{0, 0, 0, 0});
     const Rect sa = grow(shadow_area);
     if (!sa.empty()) area = area.empty() ? sa : Rect{std::min(area.x0, sa.x0), std::min(area.y0, sa.y0), std::max(area.x1, sa.x1), std::max(area.y1, sa.y1)};
@@ -1098,8 +1099,7 @@ ColorImage composite(const SensorFrame& frame, const core::TwoLevelScene& scene,
   const int rw = x1 - x0, rh = y1 - y0;
   // the buffers cover the traced rectangle and, around it, the margin the occlusion looks at
   // (hole filling, colour-guided refinement): the region's own indices, kept across frames
-  const int m = oo.fill_radius * oo.fill_passes + oo.guide_radius + 4;
-  const Rect around{std::max(0, x0 - m), std::max(0, y0 - m), std::min(w, x1 + m), std::min(h, y1 + m)};
+  const Rect around = grow(Rect{x0, y0, x1, y1});
   const int aw = around.x1 - around.x0, ah = around.y1 - around.y0;
   auto local = [&](int x, int y) { return static_cast<size_t>(y - around.y0) * aw + (x - around.x0); };
   thread_local std::vector<float> zv, coverage, alpha;

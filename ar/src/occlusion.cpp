@@ -12,9 +12,10 @@ namespace artrace::ar {
 
 namespace {
 
-/// Calls fn(begin, end) on pieces of [0, n) of `piece` items, on `threads` workers (0: every
-/// core); one piece runs on the caller's thread. For work whose items are independent, so that
-/// the result does not depend on the thread count.
+/// Calls fn(begin, end) on consecutive pieces of [0, n), `piece` items each (the last may be
+/// shorter), on `threads` workers (0: every core); n <= piece is one call on the caller's thread,
+/// with no task arena. For work whose items are independent: the pieces depend on n and `piece`
+/// only, so the result does not depend on the thread count.
 void for_pieces(size_t n, size_t piece, int threads, const std::function<void(size_t, size_t)>& fn) {
   if (n <= piece) {
     if (n > 0) fn(0, n);
