@@ -79,7 +79,7 @@ struct VirtualLight {
 
 struct CompositeOptions {
   bool occlusion = true;      ///< off: virtual objects are drawn over everything
-  OcclusionOptions occlusion_options;
+  OcclusionOptions occlusion_options;  ///< its `threads` is not read: the compositor's own `threads` counts
   bool shadows = true;        ///< shadows among the virtual objects and on the real surfaces
   bool real_shadows = true;   ///< with `shadows`: the virtual objects' shadows on real surfaces
   bool real_reflections = true;  ///< reflection/refraction rays meet the depth mesh
