@@ -38,6 +38,7 @@ struct Options {
 };
 
 void run(const Options& opt) {
+  check_output_name(opt.output);
   ArSession session(opt.recording, opt.ar, opt.quiet);
   ar::FrameSource& source = session.source();
   const int64_t count = source.frame_count().value_or(0);

@@ -29,6 +29,7 @@ struct JoinOptions {
 };
 
 void run_join(const JoinOptions& opt) {
+  check_output_name(opt.output);
   std::vector<ShardInfo> shards;
   for (const std::string& s : opt.shards) shards.push_back(read_shard_info(s));
   const ShardInfo& a = shards.front();

@@ -11,6 +11,7 @@
 #include "artrace/io/oni_file.h"
 #include "artrace/io/oni_reader.h"
 #include "recording_options.h"
+#include "shards.h"
 
 #include "artrace/ar/plane_fit.h"
 #include "artrace/io/tum_reader.h"
@@ -355,8 +356,8 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--frame", *frame, "the frame --planes looks at")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->callback([path, json, rec, planes, frame] {
       const std::filesystem::path p(*path);
-      const std::string ext = p.extension().string();
-      const nlohmann::json j = ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov" ? info_video(p)
+      const std::string ext = lower_extension(p);
+      const nlohmann::json j = is_video_path(p)                          ? info_video(p)
                                : ext == ".aff"                    ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
                                : ext == ".json"                  ? info_ar_scene(p)

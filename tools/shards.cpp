@@ -1,6 +1,8 @@
 #include "shards.h"
 
 #include <algorithm>
+#include <cctype>
+#include <iterator>
 #include <cstdio>
 #include <fstream>
 #include <stdexcept>
@@ -113,9 +115,32 @@ std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_
   return out;
 }
 
+std::string lower_extension(const std::filesystem::path& p) {
+  std::string ext = p.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
 bool is_video_path(const std::filesystem::path& p) {
-  const std::string ext = p.extension().string();
+  const std::string ext = lower_extension(p);
   return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
+}
+
+void check_output_name(const std::filesystem::path& out) {
+  if (is_video_path(out)) return;
+  const std::string ext = lower_extension(out);
+  if (ext.empty()) return;
+  static const char* const kNotWritten[] = {".webm", ".gif",  ".m4v",  ".mpg",  ".mpeg", ".mjpeg", ".wmv",
+                                            ".flv",  ".ogv",  ".ts",   ".3gp",  ".y4m",  ".h264",  ".h265",
+                                            ".hevc", ".png",  ".jpg",  ".jpeg", ".bmp",  ".tif",   ".tiff",
+                                            ".webp", ".exr",  ".avif", ".ppm"};
+  if (std::find(std::begin(kNotWritten), std::end(kNotWritten), ext) != std::end(kNotWritten)) {
+    throw std::invalid_argument(out.string() + ": " + out.extension().string() +
+                                " is not an output format (clips: .mp4, .mkv, .mov, .avi; numbered PNGs: a folder "
+                                "name without an extension)");
+  }
+  std::fprintf(stderr, "note: %s is not a clip name (.mp4, .mkv, .mov, .avi): numbered PNGs go into the folder %s\n",
+               out.string().c_str(), out.string().c_str());
 }
 
 std::filesystem::path prepare_partial(const std::filesystem::path& out) {

@@ -48,8 +48,15 @@ ShardInfo read_shard_info(const std::filesystem::path& folder);
 /// missing", "frames 20-29 are in both a/ and b/"); empty when they tile it.
 std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end);
 
-/// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov).
+/// The extension of `p` in lower case: ".mp4" for "clip.MP4".
+std::string lower_extension(const std::filesystem::path& p);
+/// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov, in any case).
 bool is_video_path(const std::filesystem::path& p);
+/// An output name checked before any work: one with the extension of a video or image format that
+/// is not written (.webm, .gif, .png, ...) is refused, since a folder of PNGs under that name is
+/// surely not what was meant; one with any other extension becomes a folder of PNGs, and a note
+/// on stderr says so. A name without an extension is a folder of PNGs, silently.
+void check_output_name(const std::filesystem::path& out);
 /// Where an output is written before it is complete: "clip.partial.mp4" beside a clip (the
 /// extension kept, so that the encoder is chosen by it), "folder.partial" for a folder of PNGs.
 /// Leaves it empty (a folder made, a clip file removed) and makes the output's parent folder.

@@ -43,6 +43,53 @@ TEST(Export, ClipReadsBackWithTheOverlayWhereTheObjectIs) {
   std::filesystem::remove_all(dir);
 }
 
+/// The output's name chooses what is written: a clip for .mp4, .mkv, .mov or .avi in any case
+/// (read back with OpenCV); a refusal, naming the extension, for a video or image format that is
+/// not written, with nothing left under that name; a folder of PNGs otherwise, with a note when
+/// the name has an extension.
+TEST(Export, OutputNameChoosesClipFolderOrRefusal) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_names");
+  std::filesystem::remove_all(dir);
+  const auto scene = box_scene(dir);
+  const auto log = dir / "log.txt";
+  auto export_to = [&](const std::filesystem::path& out) {
+    return run(std::string(ARTRACE_BINARY) + " export " + (kRoot / "data/recordings/room").string() + " --scene " +
+               scene.string() + " --frames 0:2 --no-shadows -o " + out.string() + " > " + log.string() + " 2>&1");
+  };
+  const auto upper = dir / "CLIP.AVI";
+  ASSERT_EQ(export_to(upper), 0) << ::artrace::test::read_file(log);
+  EXPECT_TRUE(std::filesystem::is_regular_file(upper));
+  cv::VideoCapture cap(upper.string());
+  ASSERT_TRUE(cap.isOpened());
+  int frames = 0;
+  for (cv::Mat img; cap.read(img);) ++frames;
+  EXPECT_EQ(frames, 2);
+
+  for (const char* name : {"clip.webm", "frame.PNG", "anim.gif"}) {
+    const auto out = dir / name;
+    EXPECT_NE(export_to(out), 0) << name;
+    const std::string text = ::artrace::test::read_file(log);
+    const std::string ext = std::filesystem::path(name).extension().string();
+    EXPECT_NE(text.find(out.string() + ": " + ext + " is not an output format"), std::string::npos) << text;
+    EXPECT_FALSE(std::filesystem::exists(out)) << name;
+  }
+
+  const auto folder = dir / "frames.v2";
+  ASSERT_EQ(export_to(folder), 0);
+  EXPECT_NE(::artrace::test::read_file(log).find("note: " + folder.string() + " is not a clip name"), std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(folder / "frame_000000.png"));
+  EXPECT_TRUE(std::filesystem::exists(folder / "frame_000001.png"));
+  const auto plain = dir / "frames";
+  ASSERT_EQ(export_to(plain), 0);
+  EXPECT_EQ(::artrace::test::read_file(log).find("is not a clip name"), std::string::npos) << "no note without an extension";
+  EXPECT_TRUE(std::filesystem::exists(plain / "frame_000001.png"));
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << e.path();
+  }
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_stop");
