@@ -278,6 +278,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--seed", opt->synth.seed, "seed of the depth model")->capture_default_str();
     add_threads_option(cmd, opt->synth.threads);
     cmd->callback([opt] {
+      note_recording_output(opt->output);
       if (opt->kinect) opt->synth.depth_model = ar::DepthModel{};
       const io::AffScene scene = io::load_aff(opt->scene);
       io::Synthesizer synth(scene, opt->synth);
@@ -297,6 +298,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("-o,--output", *dst, "TUM folder, or a file ending in .oni")->required();
     add_recording_options(cmd, *rec);
     cmd->callback([src, dst, rec] {
+      note_recording_output(*dst);
       auto in = open_recording(*src, *rec);
       auto out = io::make_recording_writer(*dst);
       ar::SensorFrame f;
@@ -389,6 +391,7 @@ void add_recording_commands(CLI::App& app) {
     add_recording_options(cmd, opt->rec);
     add_depth_shift_option(cmd, opt->rec.depth_shift);
     cmd->callback([opt] {
+      require_output_extension(opt->output, ".ply", "PLY meshes");
       auto in = open_recording(opt->source, opt->rec, opt->quiet);
       io::FusionStats st;
       const ar::RoomMesh mesh = io::fuse_recording(*in, opt->fusion, &st, [&](int k, int n) {

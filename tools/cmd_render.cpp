@@ -1,5 +1,6 @@
 // artrace render SCENE.aff -o frame.png: one frame with eye-light shading.
 #include "commands.h"
+#include "shards.h"
 
 #include "artrace/core/simd_level.h"
 #include "artrace/io/aff_scene.h"
@@ -29,6 +30,7 @@ void add_render_command(CLI::App& app) {
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
   cmd->add_flag("--single", opt->single, "trace single rays instead of packets");
   cmd->callback([opt] {
+    require_output_extension(opt->output, ".png", "PNG images");
     core::set_simd_level(core::parse_simd_level(opt->simd));
     const auto t0 = std::chrono::steady_clock::now();
     const io::AffScene scene = io::load_aff(opt->scene);

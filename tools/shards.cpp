@@ -143,6 +143,18 @@ void check_output_name(const std::filesystem::path& out) {
                out.string().c_str(), out.string().c_str());
 }
 
+void require_output_extension(const std::filesystem::path& out, const std::string& ext, const std::string& what) {
+  if (lower_extension(out) != ext) {
+    throw std::invalid_argument(out.string() + ": this command writes " + what + " (a name ending in " + ext + ")");
+  }
+}
+
+void note_recording_output(const std::filesystem::path& out) {
+  const std::string ext = lower_extension(out);
+  if (ext.empty() || ext == ".oni") return;
+  std::fprintf(stderr, "note: %s does not end in .oni: it becomes a folder in the TUM RGB-D layout\n", out.string().c_str());
+}
+
 std::filesystem::path prepare_partial(const std::filesystem::path& out) {
   const bool video = is_video_path(out);
   const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + out.extension().string())

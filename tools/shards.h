@@ -1,6 +1,7 @@
 // Shards of an export: a frame range rendered on its own into a folder of PNGs with a
 // shard.json that says which range of which recording it holds. `artrace join` checks that a set
-// of shards covers a range exactly once and encodes it in one go.
+// of shards covers a range exactly once and encodes it in one go. Also the commands' checks of
+// their output names, which choose what is written.
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -57,6 +58,12 @@ bool is_video_path(const std::filesystem::path& p);
 /// surely not what was meant; one with any other extension becomes a folder of PNGs, and a note
 /// on stderr says so. A name without an extension is a folder of PNGs, silently.
 void check_output_name(const std::filesystem::path& out);
+/// Refuses, before any work, an output name that does not end in `ext` (in any case): `what` is
+/// what the command writes ("PNG images"), for the message.
+void require_output_extension(const std::filesystem::path& out, const std::string& ext, const std::string& what);
+/// A recording's output: an .oni file (in any case), else a TUM folder; a folder name with an
+/// extension gets a note on stderr saying that it becomes a folder.
+void note_recording_output(const std::filesystem::path& out);
 /// Where an output is written before it is complete: "clip.partial.mp4" beside a clip (the
 /// extension kept, so that the encoder is chosen by it), "folder.partial" for a folder of PNGs.
 /// Leaves it empty (a folder made, a clip file removed) and makes the output's parent folder.

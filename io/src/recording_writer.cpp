@@ -5,6 +5,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -124,7 +125,9 @@ class OniRecordingWriter : public RecordingWriter {
 }  // namespace
 
 std::unique_ptr<RecordingWriter> make_recording_writer(const std::filesystem::path& path, int fps) {
-  if (path.extension() == ".oni") return std::make_unique<OniRecordingWriter>(path, fps);
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".oni") return std::make_unique<OniRecordingWriter>(path, fps);
   return std::make_unique<TumWriter>(path);
 }
 

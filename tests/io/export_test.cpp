@@ -90,6 +90,46 @@ TEST(Export, OutputNameChoosesClipFolderOrRefusal) {
   std::filesystem::remove_all(dir);
 }
 
+/// The other commands' output names: render writes PNG and fuse PLY, whatever the case of the
+/// extension, and refuse any other name before any work; convert writes an .oni file for .oni in
+/// any case (its header read back), and a TUM folder otherwise, with a note when that folder's
+/// name has an extension.
+TEST(Cli, OutputNamesChooseTheFormatOrAreRefused) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_cli_output_names");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string room = (kRoot / "data/recordings/room").string(), aff = (kRoot / "data/scenes/room.aff").string();
+  const auto log = dir / "log.txt";
+  auto artrace = [&](const std::string& args) {
+    return run(std::string(ARTRACE_BINARY) + " " + args + " > " + log.string() + " 2>&1");
+  };
+  const std::pair<std::string, std::string> refused[] = {
+      {"render " + aff + " --width 32 --height 24 -o " + (dir / "frame.JPG").string(), "frame.JPG: this command writes PNG images"},
+      {"fuse " + room + " -q -o " + (dir / "room.obj").string(), "room.obj: this command writes PLY meshes"},
+  };
+  for (const auto& [args, message] : refused) {
+    EXPECT_NE(artrace(args), 0) << args;
+    EXPECT_NE(::artrace::test::read_file(log).find(message), std::string::npos) << ::artrace::test::read_file(log);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "frame.JPG"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "room.obj"));
+
+  ASSERT_EQ(artrace("render " + aff + " --width 32 --height 24 -o " + (dir / "FRAME.PNG").string()), 0);
+  EXPECT_EQ(::artrace::test::read_file(dir / "FRAME.PNG").substr(1, 3), "PNG");
+
+  ASSERT_EQ(artrace("convert " + room + " -o " + (dir / "REC.ONI").string()), 0) << ::artrace::test::read_file(log);
+  ASSERT_TRUE(std::filesystem::is_regular_file(dir / "REC.ONI"));
+  EXPECT_EQ(::artrace::test::read_file(dir / "REC.ONI").substr(0, 4), "NI10");
+  EXPECT_EQ(::artrace::test::read_file(log).find("note:"), std::string::npos);
+
+  ASSERT_EQ(artrace("convert " + room + " -o " + (dir / "tum.v2").string()), 0);
+  EXPECT_NE(::artrace::test::read_file(log).find("note: " + (dir / "tum.v2").string() + " does not end in .oni"),
+            std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(dir / "tum.v2" / "rgb.txt"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_stop");

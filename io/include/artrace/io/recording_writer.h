@@ -19,7 +19,7 @@ class RecordingWriter {
   virtual void close() = 0;
 };
 
-/// ".oni" gives an ONI writer, anything else a TUM folder. `fps` is stored where the format has it.
+/// ".oni" (in any case) gives an ONI writer, anything else a TUM folder. `fps` is stored where the format has it.
 std::unique_ptr<RecordingWriter> make_recording_writer(const std::filesystem::path& path, int fps = 30);
 
 }  // namespace artrace::io
