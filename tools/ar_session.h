@@ -12,6 +12,8 @@
 #include "artrace/io/ar_scene.h"
 #include "artrace/io/fusion.h"
 
+#include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <string>
 
@@ -61,10 +63,29 @@ class ArSession {
   io::ArRuntime& runtime() { return *runtime_; }
   ar::CompositeOptions& options() { return options_; }
   const ar::FusedRoom* room() const { return room_.get(); }
+  /// Frames composite() gave back as recorded, for want of a pose.
+  int64_t frames_without_pose() const { return frames_without_pose_; }
 
   /// The models moved to the frame's time, and the frame composited. `update_ms` (optional): the
-  /// time the models took to move.
+  /// time the models took to move. A frame that the recording's trajectory gives no pose (it lies
+  /// outside the trajectory, or in a gap of it) has no camera to place the models with: it comes
+  /// back as recorded, and the first such frame is warned about on stderr.
   ar::ColorImage composite(const ar::SensorFrame& f, ar::CompositeStats* st, double* update_ms = nullptr) {
+    if (!f.world_from_camera) {
+      if (const auto span = source_->trajectory_span()) {
+        ++frames_without_pose_;
+        if (frames_without_pose_ == 1) {
+          std::fprintf(stderr,
+                       "warning: frame %lld (t = %.6f s) has no camera pose: the trajectory runs from %.6f to %.6f s and "
+                       "gives poses only between samples at most 0.1 s apart; such frames are shown as recorded, "
+                       "without the virtual objects\n",
+                       static_cast<long long>(f.index), f.color_time_s, span->first, span->second);
+        }
+        if (st) *st = ar::CompositeStats{};
+        if (update_ms) *update_ms = 0.0;
+        return f.color;
+      }
+    }
     const double u = runtime_->update(f.color_time_s);
     if (update_ms) *update_ms = u;
     options_.object_bounds = runtime_->object_bounds();
@@ -78,6 +99,7 @@ class ArSession {
   std::unique_ptr<io::ArRuntime> runtime_;
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
+  int64_t frames_without_pose_ = 0;
   ar::CompositeOptions options_;
 };
 

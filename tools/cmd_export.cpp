@@ -143,6 +143,10 @@ void run(const Options& opt) {
                 median(read_ms), median(update_ms), median(proxy_ms), median(trace_ms), median(shadow_ms), median(occlusion_ms),
                 median(blend_ms), median(write_ms), median(real_rays));
   }
+  if (session.frames_without_pose() > 0) {
+    std::fprintf(stderr, "warning: %lld of %lld frames had no camera pose and are as recorded, without the virtual objects\n",
+                 static_cast<long long>(session.frames_without_pose()), static_cast<long long>(total));
+  }
 }
 
 }  // namespace

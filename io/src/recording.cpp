@@ -43,6 +43,7 @@ class CameraFileSource : public ar::FrameSource {
   std::string intrinsics_source() const override {
     return camera_.file.string() + (distorted_ ? " (frames undistorted with its distortion coefficients)" : "");
   }
+  std::optional<std::pair<double, double>> trajectory_span() const override { return inner_->trajectory_span(); }
   std::vector<std::string> warnings() const override {
     std::vector<std::string> w;
     for (const std::string& s : inner_->warnings()) {

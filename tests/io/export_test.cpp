@@ -130,6 +130,55 @@ TEST(Cli, OutputNamesChooseTheFormatOrAreRefused) {
   std::filesystem::remove_all(dir);
 }
 
+/// A trajectory that does not cover a frame (here it starts half-way, with samples 0.5 s apart)
+/// gives that frame no camera: the frame is exported as recorded, with a warning naming it,
+/// instead of with the models placed by a camera at the origin. A frame the trajectory does cover
+/// (t = 1.5 s, its first sample: the identity) shows the box standing 2 m in front of it.
+TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_no_pose");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto scene = dir / "scene.json";
+  std::ofstream(scene) << R"({ "models": [ { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string()
+                       << R"(", "position": [0.0, 0.0, 2.0], "scale": 2.0,
+                            "material": { "kind": "diffuse", "base_color": [0.0, 1.0, 0.0] } } ],
+                          "lights": [ { "position": [0, 0, 0], "color": [1, 1, 1] } ], "ambient": 1.0 })";
+  const auto poses = dir / "poses.txt";
+  std::ofstream(poses) << "1.5 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n";
+  const auto room = kRoot / "data/recordings/room";
+  const auto log = dir / "log.txt";
+  auto export_frame = [&](int k, const std::filesystem::path& out) {
+    return run(std::string(ARTRACE_BINARY) + " export " + room.string() + " --scene " + scene.string() + " --trajectory " +
+               poses.string() + " --frames " + std::to_string(k) + ":" + std::to_string(k + 1) + " -o " + out.string() +
+               " > " + log.string() + " 2>&1");
+  };
+  auto differing = [](const cv::Mat& a, const cv::Mat& b) {
+    cv::Mat diff;
+    cv::absdiff(a, b, diff);
+    return cv::countNonZero(diff.reshape(1));
+  };
+  ASSERT_EQ(export_frame(0, dir / "first"), 0) << ::artrace::test::read_file(log);
+  const std::string text = ::artrace::test::read_file(log);
+  EXPECT_NE(text.find("warning: frame 0 (t = 1.000000 s) has no camera pose: the trajectory runs from 1.500000 to 2.000000 s"),
+            std::string::npos) << text;
+  EXPECT_NE(text.find("warning: 1 of 1 frames had no camera pose"), std::string::npos) << text;
+  const cv::Mat recorded = cv::imread((room / "rgb/1.000000.png").string());
+  const cv::Mat exported = cv::imread((dir / "first/frame_000000.png").string());
+  ASSERT_FALSE(recorded.empty());
+  ASSERT_EQ(exported.size(), recorded.size());
+  EXPECT_EQ(differing(exported, recorded), 0) << "the frame as recorded";
+
+  ASSERT_EQ(export_frame(15, dir / "covered"), 0);
+  EXPECT_EQ(::artrace::test::read_file(log).find("no camera pose"), std::string::npos);
+  const cv::Mat covered = cv::imread((dir / "covered/frame_000015.png").string());
+  const cv::Mat covered_recorded = cv::imread((room / "rgb/1.500000.png").string());
+  const cv::Vec3b centre = covered.at<cv::Vec3b>(covered.rows / 2, covered.cols / 2);
+  EXPECT_TRUE(centre[1] > 100 && centre[0] < 60 && centre[2] < 60) << "the green box in the middle: " << centre;
+  EXPECT_GT(differing(covered, covered_recorded), covered.rows * covered.cols / 20);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_stop");

@@ -74,6 +74,7 @@ class DepthShiftedSource : public FrameSource {
   double depth_units_per_metre() const override { return inner_->depth_units_per_metre(); }
   std::string intrinsics_source() const override { return inner_->intrinsics_source(); }
   std::vector<std::string> warnings() const override { return inner_->warnings(); }
+  std::optional<std::pair<double, double>> trajectory_span() const override { return inner_->trajectory_span(); }
 
  private:
   std::unique_ptr<FrameSource> inner_;

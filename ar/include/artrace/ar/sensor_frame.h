@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace artrace::ar {
@@ -73,6 +74,10 @@ class FrameSource {
   /// What the reader had to decide for the user at open (defaults used, frames skipped or
   /// dropped, depth not registered): the tools print these.
   virtual std::vector<std::string> warnings() const { return {}; }
+  /// The trajectory the frames take their poses from, when there is one: (first, last) sample
+  /// times in seconds. A frame outside it, or in a gap of it, comes without a pose (where a
+  /// recording without a trajectory gives each frame a fixed camera, or none).
+  virtual std::optional<std::pair<double, double>> trajectory_span() const { return std::nullopt; }
 };
 
 /// Frames held in memory as a recording (synthetic frames, tests).

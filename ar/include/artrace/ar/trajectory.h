@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace artrace::ar {
@@ -28,6 +29,11 @@ class Trajectory {
   /// The pose at time t: linear in translation, slerp in rotation between the two samples around t.
   /// Empty outside [first, last] or where the two samples are more than `max_gap_s` apart.
   std::optional<Eigen::Isometry3d> at(double t, double max_gap_s = 0.1) const;
+  /// The first and last samples' times; empty for an empty trajectory.
+  std::optional<std::pair<double, double>> span() const {
+    if (samples_.empty()) return std::nullopt;
+    return std::make_pair(samples_.front().time_s, samples_.back().time_s);
+  }
 
  private:
   std::vector<PoseSample> samples_;

@@ -52,6 +52,7 @@ class OniReader : public ar::FrameSource {
   std::string describe() const override;
   double depth_units_per_metre() const override { return depth_units_; }
   std::string intrinsics_source() const override { return intrinsics_source_; }
+  std::optional<std::pair<double, double>> trajectory_span() const override { return trajectory_.span(); }
   std::vector<std::string> warnings() const override { return warnings_; }
 
   const OniContainer& container() const { return file_; }

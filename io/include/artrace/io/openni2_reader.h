@@ -37,6 +37,7 @@ class OpenNi2Reader : public ar::FrameSource {
   std::string describe() const override;
   double depth_units_per_metre() const override { return 1000.0; }
   std::string intrinsics_source() const override { return "the streams' field of view"; }
+  std::optional<std::pair<double, double>> trajectory_span() const override { return trajectory_.span(); }
 
  private:
   struct Impl;

@@ -70,6 +70,7 @@ class TumReader : public ar::FrameSource {
   std::string describe() const override;
   double depth_units_per_metre() const override { return options_.depth_scale; }
   std::string intrinsics_source() const override { return intrinsics_source_; }
+  std::optional<std::pair<double, double>> trajectory_span() const override { return trajectory_.span(); }
   std::vector<std::string> warnings() const override { return warnings_; }
 
   const ar::PinholeIntrinsics& intrinsics() const { return intrinsics_; }
