@@ -48,6 +48,11 @@ ImageFolderReader::ImageFolderReader(const std::filesystem::path& folder, const 
   if (!accepts(folder)) throw ParseError(folder.string(), 0, 0, "needs depth/ and color/ (or a color.mp4 video)");
   depth_files_ = sorted_files(folder / "depth");
   if (depth_files_.empty()) throw ParseError((folder / "depth").string(), 0, 0, "holds no depth image");
+  if (!options_.depth_per_metre) {
+    options_.depth_per_metre = 1000.0;
+    warnings_.push_back(folder.string() + ": depth units not given: read as millimetres, 1000 a metre (what Kinect, "
+                        "RealSense and Azure Kinect tools write; --depth-scale sets them)");
+  }
   video_path_ = find_video(folder);
   if (std::filesystem::is_directory(folder / "color")) video_path_.clear();
   if (video_path_.empty()) {
@@ -102,7 +107,7 @@ bool ImageFolderReader::next(ar::SensorFrame& f) {
   f.index = cursor_;
   f.color_time_s = f.depth_time_s = static_cast<double>(cursor_) / options_.fps;
   f.color = color_from_bgr(bgr);
-  f.depth = depth_from_u16(raw, options_.depth_per_metre);
+  f.depth = depth_from_u16(raw, *options_.depth_per_metre);
   ar::PinholeIntrinsics k = intrinsics_.value_or(
       ar::PinholeIntrinsics{bgr.cols, bgr.rows, 525.0 * bgr.cols / 640.0, 525.0 * bgr.cols / 640.0, 0.5 * bgr.cols - 0.5, 0.5 * bgr.rows - 0.5});
   k.width = bgr.cols;

@@ -44,6 +44,16 @@ TEST(ImageFolder, ImagePairsInOrderWithDepthInMetres) {
     EXPECT_EQ(f.color_intrinsics.fy, 31.0);
   }
   EXPECT_FALSE(src->next(f));
+  const auto warned = [](const ar::FrameSource& s) {
+    for (const std::string& w : s.warnings()) {
+      if (w.find("depth units not given: read as millimetres") != std::string::npos) return true;
+    }
+    return false;
+  };
+  EXPECT_TRUE(warned(*src)) << "millimetres assumed, said";
+  RecordingOptions given;
+  given.depth_units_per_metre = 1000.0;
+  EXPECT_FALSE(warned(*open_recording(dir, given))) << "nothing assumed";
   src->seek(2);
   ASSERT_TRUE(src->next(f));
   EXPECT_FLOAT_EQ(f.depth.at(0, 0), 1.2f);

@@ -126,12 +126,14 @@ std::filesystem::path dot_folder(const std::string& name, int x, int y) {
 
 TEST(CameraFile, ImageFolderWithoutIntrinsicsWarnsNamingTheDefaults) {
   const auto dir = dot_folder("artrace_no_intrinsics", 10, 10);
-  auto src = open_recording(dir);
+  RecordingOptions mm;  // the depth units given: the intrinsics are all that is assumed
+  mm.depth_units_per_metre = 1000.0;
+  auto src = open_recording(dir, mm);
   ASSERT_EQ(src->warnings().size(), 1u);
   EXPECT_NE(src->warnings()[0].find("default intrinsics fx = fy = 525 px at 640 wide"), std::string::npos) << src->warnings()[0];
   EXPECT_EQ(src->intrinsics_source(), "defaults");
   std::ofstream(dir / "intrinsics.json") << R"({ "width": 320, "height": 240, "intrinsic_matrix": [300, 0, 0, 0, 300, 0, 160, 120, 1] })";
-  auto with = open_recording(dir);
+  auto with = open_recording(dir, mm);
   EXPECT_TRUE(with->warnings().empty());
   EXPECT_EQ(with->intrinsics_source(), (dir / "intrinsics.json").string());
   ar::SensorFrame f;

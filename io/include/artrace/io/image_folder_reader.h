@@ -1,5 +1,5 @@
 // Plain OpenCV sources: a folder holding depth/ (16-bit PNGs, `depth_per_metre` units, 1000 = mm by
-// default) and either color/ (images, any format OpenCV reads) or one colour video color.<ext>
+// default, with a warning) and either color/ (images, any format OpenCV reads) or one colour video color.<ext>
 // (mp4, avi, mkv, mov). Frames pair by sorted file name / video order; frame k is at k / fps seconds.
 // Optional: trajectory.txt (TUM format, poses at those times) and an intrinsics file (intrinsics_file.h;
 // without one, defaults with a warning).
@@ -18,7 +18,8 @@ namespace artrace::io {
 
 struct ImageFolderOptions {
   double fps = 30.0;  ///< for image folders; a video's own rate wins
-  double depth_per_metre = 1000.0;
+  /// stored depth units per metre; empty: 1000 (millimetres), with a warning
+  std::optional<double> depth_per_metre;
   std::optional<ar::PinholeIntrinsics> intrinsics;
   std::optional<std::filesystem::path> trajectory;  ///< else trajectory.txt when present
 };
@@ -32,7 +33,7 @@ class ImageFolderReader : public ar::FrameSource {
   bool next(ar::SensorFrame& frame) override;
   void seek(int64_t index) override;
   std::string describe() const override;
-  double depth_units_per_metre() const override { return options_.depth_per_metre; }
+  double depth_units_per_metre() const override { return *options_.depth_per_metre; }
   std::string intrinsics_source() const override { return intrinsics_source_; }
   std::optional<std::pair<double, double>> trajectory_span() const override { return trajectory_.span(); }
   std::vector<std::string> warnings() const override { return warnings_; }
