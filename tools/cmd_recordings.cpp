@@ -101,10 +101,15 @@ nlohmann::json info_recording(const std::filesystem::path& path, const Recording
   j["depth_units_per_metre"] = src->depth_units_per_metre();
   j["first_time_s"] = first.color_time_s;
   j["has_pose"] = first.world_from_camera.has_value();
+  // the trajectory the poses come from: a frame outside it, or in a gap, has none
+  if (const auto span = src->trajectory_span()) j["trajectory_s"] = {span->first, span->second};
   if (const auto n = src->frame_count(); n && *n > 1) {
     src->seek(*n - 1);
     ar::SensorFrame last;
-    if (src->next(last)) j["duration_s"] = last.color_time_s - first.color_time_s;
+    if (src->next(last)) {
+      j["duration_s"] = last.color_time_s - first.color_time_s;
+      j["last_has_pose"] = last.world_from_camera.has_value();
+    }
   }
   if (const auto* reader = dynamic_cast<const io::OniReader*>(src.get())) {
     nlohmann::json gaps = nlohmann::json::array();
