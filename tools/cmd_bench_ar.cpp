@@ -59,6 +59,7 @@ void run(const Options& opt) {
   double contact_hidden = 0.0, contact_pixels_total = 0.0;
   FrameReader reader(source);
   ar::SensorFrame f;
+  const int64_t unposed_before = session.frames_without_pose();  // the warm-up's
   const auto start = std::chrono::steady_clock::now();
   for (int64_t k = 0; k < total; ++k) {
     double rm = 0.0;
@@ -116,8 +117,15 @@ void run(const Options& opt) {
   std::printf("  shadows on real surfaces       %7.2f ms\n", median(shadow_ms));
   std::printf("  occlusion                      %7.2f ms\n", median(occlusion_ms));
   std::printf("  blend                          %7.2f ms\n", median(blend_ms));
+  const int64_t unposed = session.frames_without_pose() - unposed_before;
+  if (unposed > 0) {
+    std::printf("warning: %lld of %lld frames had no camera pose and were passed through as recorded: the figures above "
+                "are not all the compositor's\n",
+                static_cast<long long>(unposed), static_cast<long long>(total));
+  }
   nlohmann::json out{{"recording", opt.recording}, {"scene", opt.ar.scene},     {"frames", total},   {"threads", opt.ar.threads},
-                     {"fps", fps},                 {"frame_ms_median", median(frame_ms)}, {"stages", stages}, {"room", !opt.ar.room.empty() || session.room()}};
+                     {"fps", fps},                 {"frame_ms_median", median(frame_ms)}, {"stages", stages}, {"room", !opt.ar.room.empty() || session.room()},
+                     {"frames_without_pose", unposed}};
   if (opt.contact) {
     const double share_hidden = contact_pixels_total > 0 ? contact_hidden / contact_pixels_total : 0.0;
     std::printf("  contact: %.4f of the pixels touching a support plane flip between frames (median), %.4f hidden\n", median(flips), share_hidden);

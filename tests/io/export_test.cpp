@@ -176,6 +176,12 @@ TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
   const cv::Vec3b centre = covered.at<cv::Vec3b>(covered.rows / 2, covered.cols / 2);
   EXPECT_TRUE(centre[1] > 100 && centre[0] < 60 && centre[2] < 60) << "the green box in the middle: " << centre;
   EXPECT_GT(differing(covered, covered_recorded), covered.rows * covered.cols / 20);
+  // the benchmark says its figures include frames passed through
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " bench-ar " + room.string() + " --scene " + scene.string() + " --trajectory " +
+                poses.string() + " --frames 3 > " + log.string() + " 2>&1"),
+            0);
+  EXPECT_NE(::artrace::test::read_file(log).find("warning: 3 of 3 frames had no camera pose"), std::string::npos)
+      << ::artrace::test::read_file(log);
   std::filesystem::remove_all(dir);
 }
 
