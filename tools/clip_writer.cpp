@@ -2,7 +2,8 @@
 // an output context guessed from the file name, one video stream, frames converted by libswscale,
 // packets sent through avcodec_send_frame / avcodec_receive_packet, and the trailer written last.
 #include "clip_writer.h"
-#include "shards.h"
+
+#include "artrace/io/file_name.h"
 
 #include <CLI/CLI.hpp>
 #include <opencv2/core.hpp>
@@ -93,7 +94,7 @@ ClipWriter::ClipWriter(const std::filesystem::path& file, const std::string& sho
 
   const AVCodec* encoder = nullptr;
   AVPixelFormat pixels = AV_PIX_FMT_YUV420P;
-  if (lower_extension(file) == ".avi") {
+  if (io::lower_extension(file) == ".avi") {
     encoder = avcodec_find_encoder(AV_CODEC_ID_MJPEG);
     pixels = AV_PIX_FMT_YUVJ420P;  // JPEG's full range
   } else {

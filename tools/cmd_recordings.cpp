@@ -6,6 +6,7 @@
 #include "artrace/io/gltf_model.h"
 
 #include "artrace/io/aff_scene.h"
+#include "artrace/io/file_name.h"
 #include "artrace/io/fusion.h"
 #include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
@@ -363,7 +364,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--frame", *frame, "the frame --planes looks at")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->callback([path, json, rec, planes, frame] {
       const std::filesystem::path p(*path);
-      const std::string ext = lower_extension(p);
+      const std::string ext = io::lower_extension(p);
       const nlohmann::json j = is_video_path(p)                          ? info_video(p)
                                : ext == ".aff"                    ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)

@@ -1,10 +1,11 @@
 #include "shards.h"
 
+#include "artrace/io/file_name.h"
+
 #include <algorithm>
-#include <cctype>
-#include <iterator>
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 namespace artrace::tools {
@@ -115,20 +116,14 @@ std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_
   return out;
 }
 
-std::string lower_extension(const std::filesystem::path& p) {
-  std::string ext = p.extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext;
-}
-
 bool is_video_path(const std::filesystem::path& p) {
-  const std::string ext = lower_extension(p);
+  const std::string ext = io::lower_extension(p);
   return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
 }
 
 void check_output_name(const std::filesystem::path& out) {
   if (is_video_path(out)) return;
-  const std::string ext = lower_extension(out);
+  const std::string ext = io::lower_extension(out);
   if (ext.empty()) return;
   static const char* const kNotWritten[] = {".webm", ".gif",  ".m4v",  ".mpg",  ".mpeg", ".mjpeg", ".wmv",
                                             ".flv",  ".ogv",  ".ts",   ".3gp",  ".y4m",  ".h264",  ".h265",
@@ -144,13 +139,13 @@ void check_output_name(const std::filesystem::path& out) {
 }
 
 void require_output_extension(const std::filesystem::path& out, const std::string& ext, const std::string& what) {
-  if (lower_extension(out) != ext) {
+  if (io::lower_extension(out) != ext) {
     throw std::invalid_argument(out.string() + ": this command writes " + what + " (a name ending in " + ext + ")");
   }
 }
 
 void note_recording_output(const std::filesystem::path& out) {
-  const std::string ext = lower_extension(out);
+  const std::string ext = io::lower_extension(out);
   if (ext.empty() || ext == ".oni") return;
   std::fprintf(stderr, "note: %s does not end in .oni: it becomes a folder in the TUM RGB-D layout\n", out.string().c_str());
 }

@@ -49,8 +49,6 @@ ShardInfo read_shard_info(const std::filesystem::path& folder);
 /// missing", "frames 20-29 are in both a/ and b/"); empty when they tile it.
 std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end);
 
-/// The extension of `p` in lower case: ".mp4" for "clip.MP4".
-std::string lower_extension(const std::filesystem::path& p);
 /// Whether a path names a video clip by its extension (.mp4, .avi, .mkv, .mov, in any case).
 bool is_video_path(const std::filesystem::path& p);
 /// An output name checked before any work: one with the extension of a video or image format that

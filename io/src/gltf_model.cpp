@@ -1,4 +1,5 @@
 #include "artrace/io/gltf_model.h"
+#include "artrace/io/file_name.h"
 #include "artrace/io/parse_error.h"
 #include "cv_convert.h"
 
@@ -302,7 +303,7 @@ GltfModel load_gltf(const std::filesystem::path& path) {
   std::string base = base_folder(file);
   loader.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_file, &tinygltf::WriteWholeFile, &base});
   if (!std::filesystem::exists(path)) throw ParseError(file, 0, 0, "no such file");
-  const bool ok = path.extension() == ".glb" ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
+  const bool ok = lower_extension(path) == ".glb" ? loader.LoadBinaryFromFile(&m, &err, &warn, file)
                                              : loader.LoadASCIIFromFile(&m, &err, &warn, file);
   if (!ok) throw ParseError(file, 0, 0, "not a readable glTF 2.0 file: " + (err.empty() ? warn : err));
   // the images in bufferViews, their ranges checked against the buffers that hold them

@@ -1,4 +1,5 @@
 #include "artrace/io/gltf_model.h"
+#include "artrace/io/file_name.h"
 
 #include <tiny_gltf.h>
 
@@ -177,7 +178,7 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
     m.animations.push_back(a);
   }
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-  const bool binary = path.extension() == ".glb";
+  const bool binary = lower_extension(path) == ".glb";
   const std::filesystem::path tmp = path.string() + (binary ? ".partial.glb" : ".partial.gltf");
   tinygltf::TinyGLTF writer;
   if (!writer.WriteGltfSceneToFile(&m, tmp.string(), true, true, true, binary)) {

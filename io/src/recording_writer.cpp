@@ -1,11 +1,11 @@
 #include "artrace/io/recording_writer.h"
+#include "artrace/io/file_name.h"
 #include "artrace/io/oni_writer.h"
 #include "artrace/io/tum_reader.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <iomanip>
@@ -125,9 +125,7 @@ class OniRecordingWriter : public RecordingWriter {
 }  // namespace
 
 std::unique_ptr<RecordingWriter> make_recording_writer(const std::filesystem::path& path, int fps) {
-  std::string ext = path.extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".oni") return std::make_unique<OniRecordingWriter>(path, fps);
+  if (lower_extension(path) == ".oni") return std::make_unique<OniRecordingWriter>(path, fps);
   return std::make_unique<TumWriter>(path);
 }
 

@@ -14,10 +14,12 @@ namespace {
 
 TEST(Gltf, WrittenModelsLoadBackWithAnimation) {
   const auto dir = ::artrace::test::scratch_path("artrace_gltf");
-  for (const char* name : {"box.gltf", "box.glb"}) {
+  for (const char* name : {"box.gltf", "box.glb", "BOX.GLB"}) {  // the extension's case does not matter
     const auto path = dir / name;
     const GltfModel box = make_spinning_box(0.5f, {0.8f, 0.2f, 0.1f});
     write_gltf(box, path);
+    EXPECT_EQ(::artrace::test::read_file(path).substr(0, 4) == "glTF", std::string(name) != "box.gltf")
+        << name << ": the binary container's magic";
     const GltfModel m = load_gltf(path);
     ASSERT_EQ(m.meshes.size(), 1u);
     ASSERT_EQ(m.meshes[0].tris.size(), 12u);
