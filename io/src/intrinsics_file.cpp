@@ -1,4 +1,5 @@
 #include "artrace/io/intrinsics_file.h"
+#include "artrace/io/file_name.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/tum_reader.h"
 
@@ -141,7 +142,7 @@ CameraFile read_yaml(const std::filesystem::path& path) {
 }  // namespace
 
 CameraFile read_camera_file(const std::filesystem::path& path) {
-  const std::string ext = path.extension().string();
+  const std::string ext = lower_extension(path);
   CameraFile c;
   if (ext == ".json") {
     c = read_json(path);

@@ -20,8 +20,8 @@ std::filesystem::path write_file(const std::string& name, const std::string& tex
 }
 
 TEST(CameraFile, Open3dPinholeCameraIntrinsicIsColumnMajor) {
-  const auto p = write_file("open3d.json", R"({ "width": 640, "height": 480,
-      "intrinsic_matrix": [600.0, 0.0, 0.0, 0.0, 601.0, 0.0, 320.5, 240.25, 1.0] })");
+  const auto p = write_file("OPEN3D.JSON", R"({ "width": 640, "height": 480,
+      "intrinsic_matrix": [600.0, 0.0, 0.0, 0.0, 601.0, 0.0, 320.5, 240.25, 1.0] })");  // any case
   const CameraFile c = read_camera_file(p);
   EXPECT_DOUBLE_EQ(c.intrinsics.fx, 600.0);
   EXPECT_DOUBLE_EQ(c.intrinsics.fy, 601.0);
