@@ -38,14 +38,16 @@ inline void synth_room(const std::filesystem::path& out, int frames, int width, 
   synth.write(*w);
 }
 
-/// An AR scene with one diffuse box right in front of the camera's first view.
-inline std::filesystem::path box_scene(const std::filesystem::path& dir) {
+/// An AR scene with one green diffuse box, by default right in front of the demo room's first
+/// view; `position` and `light` are JSON arrays (world metres).
+inline std::filesystem::path box_scene(const std::filesystem::path& dir, const std::string& position = "[0.7, 0.45, 1.0]",
+                                       double scale = 2.5, const std::string& light = "[2.6, 1.6, 3.4]") {
   std::filesystem::create_directories(dir);
   const auto scene = dir / "scene.json";
   std::ofstream(scene) << R"({ "models": [ { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string()
-                       << R"(", "position": [0.7, 0.45, 1.0], "scale": 2.5,
+                       << R"(", "position": )" << position << R"(, "scale": )" << scale << R"(,
                             "material": { "kind": "diffuse", "base_color": [0.0, 1.0, 0.0] } } ],
-                          "lights": [ { "position": [2.6, 1.6, 3.4], "color": [1, 1, 1] } ], "ambient": 1.0 })";
+                          "lights": [ { "position": )" << light << R"(, "color": [1, 1, 1] } ], "ambient": 1.0 })";
   return scene;
 }
 

@@ -138,12 +138,7 @@ TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_no_pose");
   std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  const auto scene = dir / "scene.json";
-  std::ofstream(scene) << R"({ "models": [ { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string()
-                       << R"(", "position": [0.0, 0.0, 2.0], "scale": 2.0,
-                            "material": { "kind": "diffuse", "base_color": [0.0, 1.0, 0.0] } } ],
-                          "lights": [ { "position": [0, 0, 0], "color": [1, 1, 1] } ], "ambient": 1.0 })";
+  const auto scene = box_scene(dir, "[0.0, 0.0, 2.0]", 2.0, "[0, 0, 0]");  // 2 m in front of a camera at the origin
   const auto poses = dir / "poses.txt";
   std::ofstream(poses) << "1.5 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n";
   const auto room = kRoot / "data/recordings/room";
