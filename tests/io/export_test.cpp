@@ -168,6 +168,8 @@ TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
   EXPECT_EQ(::artrace::test::read_file(log).find("no camera pose"), std::string::npos);
   const cv::Mat covered = cv::imread((dir / "covered/frame_000015.png").string());
   const cv::Mat covered_recorded = cv::imread((room / "rgb/1.500000.png").string());
+  ASSERT_FALSE(covered.empty());
+  ASSERT_EQ(covered.size(), covered_recorded.size());
   const cv::Vec3b centre = covered.at<cv::Vec3b>(covered.rows / 2, covered.cols / 2);
   EXPECT_TRUE(centre[1] > 100 && centre[0] < 60 && centre[2] < 60) << "the green box in the middle: " << centre;
   EXPECT_GT(differing(covered, covered_recorded), covered.rows * covered.cols / 20);
