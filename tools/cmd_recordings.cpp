@@ -365,8 +365,8 @@ void add_recording_commands(CLI::App& app) {
     cmd->callback([path, json, rec, planes, frame] {
       const std::filesystem::path p(*path);
       const std::string ext = io::lower_extension(p);
-      const nlohmann::json j = is_video_path(p)                          ? info_video(p)
-                               : ext == ".aff"                    ? info_aff(p)
+      const nlohmann::json j = is_video_path(p)                  ? info_video(p)
+                               : ext == ".aff"                   ? info_aff(p)
                                : ext == ".gltf" || ext == ".glb" ? info_gltf(p)
                                : ext == ".json"                  ? info_ar_scene(p)
                                                                  : info_recording(p, *rec, *planes ? *frame : -1);

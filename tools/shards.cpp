@@ -116,15 +116,17 @@ std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_
   return out;
 }
 
-bool is_video_path(const std::filesystem::path& p) {
-  const std::string ext = io::lower_extension(p);
-  return ext == ".mp4" || ext == ".avi" || ext == ".mkv" || ext == ".mov";
+namespace {
+bool is_clip_extension(const std::string& lower_ext) {
+  return lower_ext == ".mp4" || lower_ext == ".avi" || lower_ext == ".mkv" || lower_ext == ".mov";
 }
+}  // namespace
+
+bool is_video_path(const std::filesystem::path& p) { return is_clip_extension(io::lower_extension(p)); }
 
 void check_output_name(const std::filesystem::path& out) {
-  if (is_video_path(out)) return;
   const std::string ext = io::lower_extension(out);
-  if (ext.empty()) return;
+  if (ext.empty() || is_clip_extension(ext)) return;
   static const char* const kNotWritten[] = {".webm", ".gif",  ".m4v",  ".mpg",  ".mpeg", ".mjpeg", ".wmv",
                                             ".flv",  ".ogv",  ".ts",   ".3gp",  ".y4m",  ".h264",  ".h265",
                                             ".hevc", ".png",  ".jpg",  ".jpeg", ".bmp",  ".tif",   ".tiff",
