@@ -37,7 +37,7 @@ inline void add_ar_options(CLI::App* cmd, ArArgs& a) {
 
 class ArSession {
  public:
-  ArSession(const std::string& recording, const ArArgs& args, bool quiet = false) : scene_file_(io::load_ar_scene(args.scene)) {
+  ArSession(const std::string& recording, const ArArgs& args, bool quiet = false) : recording_(recording), scene_file_(io::load_ar_scene(args.scene)) {
     if (!quiet) {
       for (const io::GltfModel& m : scene_file_.loaded) {
         for (const std::string& w : m.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
@@ -69,7 +69,9 @@ class ArSession {
   /// The models moved to the frame's time, and the frame composited. `update_ms` (optional): the
   /// time the models took to move. A frame that the recording's trajectory gives no pose (it lies
   /// outside the trajectory, or in a gap of it) has no camera to place the models with: it comes
-  /// back as recorded, and the first such frame is warned about on stderr.
+  /// back as recorded, and the first such frame is warned about on stderr. A recording without any
+  /// trajectory (a TUM or image folder without one) is composited with a fixed camera at the
+  /// world's origin, as an .oni file's is, with a warning the first time.
   ar::ColorImage composite(const ar::SensorFrame& f, ar::CompositeStats* st, double* update_ms = nullptr) {
     if (!f.world_from_camera) {
       if (const auto span = source_->trajectory_span()) {
@@ -85,6 +87,13 @@ class ArSession {
         if (update_ms) *update_ms = 0.0;
         return f.color;
       }
+      if (!warned_fixed_camera_) {
+        warned_fixed_camera_ = true;
+        std::fprintf(stderr,
+                     "warning: %s has no trajectory: the camera is taken as fixed, the AR scene's world being the camera's "
+                     "frame (x right, y down, z forward, metres); give one with --trajectory, or estimate one with artrace track\n",
+                     recording_.c_str());
+      }
     }
     const double u = runtime_->update(f.color_time_s);
     if (update_ms) *update_ms = u;
@@ -94,12 +103,14 @@ class ArSession {
   }
 
  private:
+  std::string recording_;
   io::ArSceneFile scene_file_;
   std::unique_ptr<ar::FrameSource> source_;
   std::unique_ptr<io::ArRuntime> runtime_;
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
   int64_t frames_without_pose_ = 0;
+  bool warned_fixed_camera_ = false;
   ar::CompositeOptions options_;
 };
 

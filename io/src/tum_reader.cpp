@@ -97,6 +97,9 @@ ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
     }
     samples.push_back(s);
   }
+  // an empty trajectory would leave every frame without a camera (or, for .oni files, with a
+  // fixed one) and say nothing
+  if (samples.empty()) throw ParseError(path.string(), 0, 0, "holds no pose (lines 'timestamp tx ty tz qx qy qz qw')");
   return ar::Trajectory(std::move(samples));
 }
 

@@ -182,6 +182,50 @@ TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
   std::filesystem::remove_all(dir);
 }
 
+/// A TUM folder without groundtruth.txt has no camera poses at all: the export places the models
+/// with a fixed camera, the AR scene's world being the camera's frame (as for an .oni file without
+/// a trajectory), and says so, naming the recording, instead of doing it silently. The box 2 m in
+/// front of that camera stands in the middle of the frame. An empty --trajectory file is refused.
+TEST(Export, RecordingWithoutATrajectoryIsCompositedWithAFixedCameraAndAWarning) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_no_trajectory");
+  std::filesystem::remove_all(dir);
+  const auto scene = box_scene(dir, "[0.0, 0.0, 2.0]", 2.0, "[0, 0, 0]");  // 2 m in front of a camera at the origin
+  const auto rec = dir / "rec";
+  std::filesystem::copy(kRoot / "data/recordings/room", rec, std::filesystem::copy_options::recursive);
+  std::filesystem::remove(rec / "groundtruth.txt");
+  const auto log = dir / "log.txt";
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " export " + rec.string() + " --scene " + scene.string() + " --frames 0:2 -o " +
+                (dir / "out").string() + " > " + log.string() + " 2>&1"),
+            0)
+      << ::artrace::test::read_file(log);
+  const std::string text = ::artrace::test::read_file(log);
+  const std::string warning = "warning: " + rec.string() + " has no trajectory: the camera is taken as fixed";
+  EXPECT_NE(text.find(warning), std::string::npos) << text;
+  EXPECT_EQ(text.find(warning, text.find(warning) + 1), std::string::npos) << "warned once: " << text;
+  for (const char* name : {"frame_000000.png", "frame_000001.png"}) {
+    const cv::Mat img = cv::imread((dir / "out" / name).string());
+    ASSERT_FALSE(img.empty()) << name;
+    const cv::Vec3b centre = img.at<cv::Vec3b>(img.rows / 2, img.cols / 2);
+    EXPECT_TRUE(centre[1] > 100 && centre[0] < 60 && centre[2] < 60) << name << ": the green box in the middle: " << centre;
+  }
+  // with the recording's own trajectory: no such warning
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " export " + (kRoot / "data/recordings/room").string() + " --scene " +
+                scene.string() + " --frames 0:1 -o " + (dir / "posed").string() + " > " + log.string() + " 2>&1"),
+            0);
+  EXPECT_EQ(::artrace::test::read_file(log).find("has no trajectory"), std::string::npos) << ::artrace::test::read_file(log);
+
+  const auto empty = dir / "empty.txt";
+  std::ofstream(empty) << "# timestamp tx ty tz qx qy qz qw\n";
+  EXPECT_NE(run(std::string(ARTRACE_BINARY) + " export " + rec.string() + " --scene " + scene.string() + " --trajectory " +
+                empty.string() + " --frames 0:1 -o " + (dir / "refused").string() + " > " + log.string() + " 2>&1"),
+            0);
+  EXPECT_NE(::artrace::test::read_file(log).find(empty.string() + ": holds no pose"), std::string::npos)
+      << ::artrace::test::read_file(log);
+  EXPECT_FALSE(std::filesystem::exists(dir / "refused"));
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_stop");

@@ -155,6 +155,27 @@ TEST(Intrinsics, ValuesOutOfRangeNameFileLineAndValue) {
   std::filesystem::remove_all(dir);
 }
 
+/// A trajectory file without a single pose (only comments, or nothing) is refused, naming the
+/// file: read as an empty trajectory it left every frame without a camera, or (for .oni files)
+/// with a fixed one, and nothing said so.
+TEST(Tum, TrajectoryWithoutPosesIsRefused) {
+  const auto dir = ::artrace::test::scratch_path("artrace_empty_trajectory");
+  std::filesystem::create_directories(dir);
+  const auto path = dir / "poses.txt";
+  std::ofstream(path) << "# timestamp tx ty tz qx qy qz qw\n1.0 0 0 0 0 0 0 1\n";
+  EXPECT_EQ(read_tum_trajectory(path).size(), 1u);
+  for (const char* text : {"# timestamp tx ty tz qx qy qz qw\n\n", ""}) {
+    std::ofstream(path) << text;
+    try {
+      read_tum_trajectory(path);
+      ADD_FAILURE() << "accepted \"" << text << "\"";
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string() + ": holds no pose"), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
 /// Every reader over every broken input: a ParseError naming the file, never a crash.
 TEST(BrokenInputs, EveryReaderRefusesEveryBrokenInputWithTheFileNamed) {
   const std::filesystem::path root = std::filesystem::path(ARTRACE_SOURCE_DIR) / "tests/data/broken";
