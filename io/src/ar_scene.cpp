@@ -17,6 +17,7 @@ using nlohmann::json;
 
 /// The largest magnitude an AR scene's number may have (1,000 km in metres).
 constexpr double kMaxMagnitude = 1e6;
+constexpr float kMaxMagnitudeF = static_cast<float>(kMaxMagnitude);
 
 class Checker {
  public:
@@ -48,6 +49,22 @@ class Checker {
       fail(key, what.str());
     }
     return static_cast<float>(v);
+  }
+  /// A number from 0 to 1 (a factor or a linear colour's component).
+  float unit(const json& j, const std::string& key) const { return within(number(j, key), 0.0f, 1.0f, key, "a number from 0 to 1"); }
+  glm::vec3 unit3(const json& j, const std::string& key) const {
+    const glm::vec3 v = vec3(j, key);
+    for (int k = 0; k < 3; ++k) within(v[k], 0.0f, 1.0f, key, "a number from 0 to 1");
+    return v;
+  }
+  /// `v` if it lies in [lo, hi], else a failure saying what was expected and what came.
+  float within(float v, float lo, float hi, const std::string& key, const std::string& expected) const {
+    if (!(v >= lo && v <= hi)) {
+      std::ostringstream what;
+      what << "expected " << expected << ", got " << v;
+      fail(key, what.str());
+    }
+    return v;
   }
   std::string string(const json& j, const std::string& key) const {
     if (!j.is_string()) fail(key, "expected a string");
@@ -82,7 +99,7 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
   c.keys(root, "", {"models", "lights", "ambient", "room"});
   ArSceneFile out;
   out.file = path;
-  if (root.contains("ambient")) out.ambient = c.number(root["ambient"], "ambient");
+  if (root.contains("ambient")) out.ambient = c.unit(root["ambient"], "ambient");
   if (root.contains("room")) {
     out.room = path.parent_path() / c.string(root["room"], "room");
     if (!std::filesystem::exists(*out.room)) c.fail("room", "no such file: " + out.room->string());
@@ -100,6 +117,10 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
       if (m.contains("rotation_deg")) p.rotation_deg = c.vec3(m["rotation_deg"], at + ".rotation_deg");
       if (m.contains("scale")) {
         p.scale = m["scale"].is_number() ? glm::vec3(c.number(m["scale"], at + ".scale")) : c.vec3(m["scale"], at + ".scale");
+        // 0 flattens the model to nothing (drawn nowhere); a negative scale mirrors it
+        for (int k = 0; k < 3; ++k) {
+          if (p.scale[k] == 0.0f) c.fail(at + ".scale", "expected a scale other than 0, got 0");
+        }
       }
       if (m.contains("anchor")) {
         const json& a = m["anchor"];
@@ -157,10 +178,12 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
           else if (k == "glass") p.kind = SurfaceKind::kGlass;
           else c.fail(at + ".material.kind", "expected diffuse, mirror or glass, got '" + k + "'");
         }
-        if (mat.contains("base_color")) p.base_color = c.vec3(mat["base_color"], at + ".material.base_color");
-        if (mat.contains("ior")) p.ior = c.number(mat["ior"], at + ".material.ior");
-        if (mat.contains("metallic")) p.metallic = c.number(mat["metallic"], at + ".material.metallic");
-        if (mat.contains("roughness")) p.roughness = c.number(mat["roughness"], at + ".material.roughness");
+        if (mat.contains("base_color")) p.base_color = c.unit3(mat["base_color"], at + ".material.base_color");
+        if (mat.contains("ior")) {
+          p.ior = c.within(c.number(mat["ior"], at + ".material.ior"), 1.0f, kMaxMagnitudeF, at + ".material.ior", "1 or more");
+        }
+        if (mat.contains("metallic")) p.metallic = c.unit(mat["metallic"], at + ".material.metallic");
+        if (mat.contains("roughness")) p.roughness = c.unit(mat["roughness"], at + ".material.roughness");
       }
       out.models.push_back(p);
       out.loaded.push_back(std::move(model));
@@ -175,7 +198,10 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
       ArLightSpec s;
       if (!l.contains("position")) c.fail(at + ".position", "missing");
       s.position = c.vec3(l["position"], at + ".position");
-      if (l.contains("color")) s.color = c.vec3(l["color"], at + ".color");
+      if (l.contains("color")) {
+        s.color = c.vec3(l["color"], at + ".color");
+        for (int k = 0; k < 3; ++k) c.within(s.color[k], 0.0f, kMaxMagnitudeF, at + ".color", "0 or more");
+      }
       out.lights.push_back(s);
     }
   }

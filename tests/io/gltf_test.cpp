@@ -272,6 +272,48 @@ TEST(ArSceneFile, MalformedScenesNameFileKeyAndProblem) {
   std::filesystem::remove_all(dir);
 }
 
+/// Numbers a scene's keys cannot mean are refused, naming the file, the key and the value: a scale
+/// of 0 (the model flattened to nothing, drawn nowhere), an ambient term or a material factor
+/// outside 0-1, a base colour outside 0-1 (a surface giving back more light than it receives), an
+/// index of refraction below 1, a negative light colour. Each was rendered without a word. The
+/// bounds themselves, and a negative scale (a mirror image), are accepted.
+TEST(ArSceneFile, ValuesWithoutAMeaningAreRefused) {
+  const auto dir = ::artrace::test::scratch_path("artrace_ar_ranges");
+  std::filesystem::create_directories(dir);
+  write_gltf(make_spinning_box(0.2f, {0.9f, 0.3f, 0.1f}), dir / "box.gltf");
+  auto model = [](const std::string& keys) { return R"({ "models": [ { "file": "box.gltf", )" + keys + " } ] }"; };
+  const std::pair<std::string, std::string> cases[] = {
+      {model(R"("scale": 0)"), "models[0].scale: expected a scale other than 0, got 0"},
+      {model(R"("scale": [1, 0, 2])"), "models[0].scale: expected a scale other than 0, got 0"},
+      {R"({ "ambient": 2 })", "ambient: expected a number from 0 to 1, got 2"},
+      {R"({ "ambient": -0.25 })", "ambient: expected a number from 0 to 1, got -0.25"},
+      {model(R"("material": { "metallic": 1.5 })"), "models[0].material.metallic: expected a number from 0 to 1, got 1.5"},
+      {model(R"("material": { "roughness": -0.5 })"), "models[0].material.roughness: expected a number from 0 to 1, got -0.5"},
+      {model(R"("material": { "base_color": [0.5, 2, 0.5] })"), "models[0].material.base_color: expected a number from 0 to 1, got 2"},
+      {model(R"("material": { "kind": "glass", "ior": 0.5 })"), "models[0].material.ior: expected 1 or more, got 0.5"},
+      {R"({ "lights": [ { "position": [0, 1, 0], "color": [1, -1, 1] } ] })", "lights[0].color: expected 0 or more, got -1"},
+  };
+  for (const auto& [text, expected] : cases) {
+    std::ofstream(dir / "scene.json") << text;
+    try {
+      load_ar_scene(dir / "scene.json");
+      ADD_FAILURE() << "accepted " << text;
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find((dir / "scene.json").string() + ": " + expected), std::string::npos) << e.what();
+    }
+  }
+  std::ofstream(dir / "scene.json") << model(R"("scale": -1, "material": { "kind": "glass", "ior": 1, "metallic": 1,
+      "roughness": 0, "base_color": [0, 1, 1] })").insert(1, R"( "ambient": 1, "lights": [ { "position": [0, 1, 0], "color": [0, 5, 0] } ], )");
+  const ArSceneFile ok = load_ar_scene(dir / "scene.json");
+  EXPECT_EQ(ok.ambient, 1.0f);
+  EXPECT_EQ(ok.models.at(0).scale, glm::vec3(-1.0f));
+  EXPECT_EQ(ok.models.at(0).ior, 1.0f);
+  EXPECT_EQ(ok.models.at(0).metallic, 1.0f);
+  EXPECT_EQ(ok.models.at(0).roughness, 0.0f);
+  EXPECT_EQ(ok.lights.at(0).color, glm::vec3(0.0f, 5.0f, 0.0f));
+  std::filesystem::remove_all(dir);
+}
+
 /// Glass of each kind gives the scene its transmittance: a shadow ray through a glass box (two
 /// faces) keeps T^2 of the light, static or node-animated, and one through the skinned tube some
 /// but not all of it; the same models, not glass, block it.
