@@ -49,6 +49,7 @@ std::vector<Job> read_manifest(const std::filesystem::path& file) {
     throw std::runtime_error(file.string() + ": expected {\"jobs\": [...]} with at least one job");
   }
   std::vector<Job> jobs;
+  std::map<std::filesystem::path, size_t> writers;  // each output, as one path, and its job
   for (size_t i = 0; i < j["jobs"].size(); ++i) {
     const nlohmann::json& e = j["jobs"][i];
     const std::string where = file.string() + ": jobs[" + std::to_string(i) + "]";
@@ -67,6 +68,14 @@ std::vector<Job> read_manifest(const std::filesystem::path& file) {
       job.output = resolve(e["output"].get<std::string>());
       if (e.contains("frames")) job.frames = e["frames"].get<std::string>();
       if (e.contains("args")) job.args = e["args"].get<std::vector<std::string>>();
+      // two jobs with one output: the later overwrote the earlier, or both wrote it at once
+      std::filesystem::path key = std::filesystem::weakly_canonical(job.output).lexically_normal();
+      if (!key.has_filename()) key = key.parent_path();  // a trailing separator
+      const auto [at, first] = writers.emplace(key, i);
+      if (!first) {
+        throw std::runtime_error("output \"" + e["output"].get<std::string>() + "\" is also jobs[" + std::to_string(at->second) +
+                                 "]'s: each job needs an output of its own");
+      }
     } catch (const std::exception& ex) {
       throw std::runtime_error(where + ": " + ex.what());
     }

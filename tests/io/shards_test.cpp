@@ -233,6 +233,17 @@ TEST(Batch, ManifestJobsRunSideBySideAndJoin) {
   std::ofstream(dir / "typo.json") << R"({"jobs": [{"recording": "r", "scene": "s", "output": "o", "frame": "0:3"}]})";
   EXPECT_EQ(run_capture(bin() + " batch " + (dir / "typo.json").string(), out, dir), 1);
   EXPECT_NE(out.find("typo.json: jobs[0]: unknown key \"frame\""), std::string::npos) << out;
+  // two jobs writing the same output (the second overwrote the first, or with --parallel both
+  // wrote it at once): refused before any job runs
+  std::ofstream(dir / "twice.json") << R"({"jobs": [
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "same/a", "frames": "0:2"},
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "same/b", "frames": "2:4"},
+      {"recording": ")" << kRoom << R"(", "scene": ")" << kDemo << R"(", "output": "./same//a/", "frames": "4:6"}]})";
+  EXPECT_EQ(run_capture(bin() + " batch " + (dir / "twice.json").string(), out, dir), 1);
+  EXPECT_NE(out.find("twice.json: jobs[2]: output \"./same//a/\" is also jobs[0]'s: each job needs an output of its own"),
+            std::string::npos)
+      << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "same")) << "no job ran";
   std::filesystem::remove_all(dir);
 }
 
