@@ -1,6 +1,8 @@
 // Small helpers shared by the benchmark commands.
 #pragma once
 
+#include "artrace/io/atomic_file.h"
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -25,15 +27,7 @@ inline double ms_since(std::chrono::steady_clock::time_point t0) {
 
 inline void write_json(const std::string& path, const nlohmann::json& j) {
   if (path.empty()) return;
-  const std::filesystem::path p(path);
-  if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path());
-  const std::filesystem::path tmp = p.string() + ".partial";
-  {
-    std::ofstream f(tmp);
-    f << j.dump(2) << "\n";
-    if (!f) throw std::runtime_error(path + ": cannot write");
-  }
-  std::filesystem::rename(tmp, p);
+  io::write_file_atomically(path, j.dump(2) + "\n");
 }
 
 }  // namespace artrace::tools

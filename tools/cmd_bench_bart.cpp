@@ -8,6 +8,7 @@
 #include "plot.h"
 
 #include "artrace/core/simd_level.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/bart_shading.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -222,7 +223,7 @@ void run_report(const ReportOptions& ro) {
   }
   std::printf("\n%s", table.c_str());
   std::filesystem::create_directories(ro.out);
-  std::ofstream(std::filesystem::path(ro.out) / "table1.md") << table;
+  io::write_file_atomically(std::filesystem::path(ro.out) / "table1.md", table);
   write_json((std::filesystem::path(ro.out) / "table1.json").string(), all);
 }
 

@@ -12,9 +12,9 @@
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/recording.h"
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <atomic>
@@ -103,7 +103,7 @@ void run(const Options& opt) {
         if (!writer) writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), opt.clip);
         writer->write(img);
       } else {
-        if (!cv::imwrite(frame_png(partial, first + k).string(), img)) throw std::runtime_error(out.string() + ": cannot write PNG");
+        io::write_png(frame_png(partial, first + k), img, /*atomically=*/false);  // the folder is partial until the end
         width = img.cols;
         height = img.rows;
       }

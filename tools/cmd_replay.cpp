@@ -14,10 +14,10 @@
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/recording.h"
 
 #include <opencv2/highgui.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <dlfcn.h>
@@ -291,12 +291,7 @@ class Replay {
     }
   }
 
-  void save(const std::string& path) const {
-    const std::filesystem::path p(path), tmp = p.parent_path() / (p.stem().string() + ".partial.png");
-    if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path());
-    if (!cv::imwrite(tmp.string(), view_)) throw std::runtime_error(path + ": cannot write PNG");
-    std::filesystem::rename(tmp, p);
-  }
+  void save(const std::string& path) const { io::write_png(path, view_); }
 
   const Options& opt_;
   ArSession session_;

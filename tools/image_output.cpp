@@ -1,8 +1,9 @@
 #include "commands.h"
 
 #include "artrace/core/srgb.h"
+#include "artrace/io/atomic_file.h"
 
-#include <opencv2/imgcodecs.hpp>
+#include <opencv2/core.hpp>
 
 #include <cmath>
 #include <stdexcept>
@@ -16,13 +17,7 @@ void write_png(const core::Image& img, const std::filesystem::path& path) {
       mat.at<cv::Vec3b>(y, x) = cv::Vec3b(core::linear_to_srgb8(c.b), core::linear_to_srgb8(c.g), core::linear_to_srgb8(c.r));
     }
   }
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-  const std::filesystem::path tmp = path.string() + ".partial.png";
-  if (!cv::imwrite(tmp.string(), mat)) {
-    std::filesystem::remove(tmp);
-    throw std::runtime_error(path.string() + ": cannot write PNG");
-  }
-  std::filesystem::rename(tmp, path);
+  io::write_png(path, mat);
 }
 
 }  // namespace artrace::tools

@@ -1,6 +1,7 @@
 #include "plot.h"
 
-#include <opencv2/imgcodecs.hpp>
+#include "artrace/io/atomic_file.h"
+
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -59,10 +60,7 @@ void plot(const std::string& title, const std::vector<std::pair<std::string, std
     cv::putText(img, series[s].first, {w - 222, top + 15 + 20 * static_cast<int>(s)}, cv::FONT_HERSHEY_SIMPLEX, 0.45, axis, 1,
                 cv::LINE_AA);
   }
-  if (file.has_parent_path()) std::filesystem::create_directories(file.parent_path());
-  const std::filesystem::path tmp = file.parent_path() / (file.stem().string() + ".partial.png");
-  if (!cv::imwrite(tmp.string(), img)) throw std::runtime_error(file.string() + ": cannot write PNG");
-  std::filesystem::rename(tmp, file);
+  io::write_png(file, img);
 }
 
 }  // namespace artrace::tools

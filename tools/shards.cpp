@@ -1,5 +1,6 @@
 #include "shards.h"
 
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/file_name.h"
 
 #include <algorithm>
@@ -54,9 +55,7 @@ void write_shard_info(const ShardInfo& s) {
   const nlohmann::json j = {{"recording", s.recording}, {"first", s.first},   {"end", s.end},
                             {"recording_frames", s.recording_frames},       {"width", s.width},
                             {"height", s.height},       {"fps", s.fps}};
-  std::ofstream f(s.folder / kShardManifest);
-  f << j.dump(2) << "\n";
-  if (!f) throw std::runtime_error((s.folder / kShardManifest).string() + ": cannot write");
+  io::write_file(s.folder / kShardManifest, j.dump(2) + "\n");
 }
 
 ShardInfo read_shard_info(const std::filesystem::path& folder) {

@@ -37,13 +37,13 @@ nlohmann::json SoakLog::report() const {
   const std::filesystem::path prefix(prefix_);
   if (prefix.has_parent_path()) std::filesystem::create_directories(prefix.parent_path());
   {
-    const std::filesystem::path csv = prefix_ + ".csv", tmp = prefix_ + ".csv.partial";
-    FILE* f = std::fopen(tmp.string().c_str(), "w");
-    if (!f) throw std::runtime_error(csv.string() + ": cannot write");
-    std::fprintf(f, "%s,resident_mb,%s_ms_median\n", unit_.c_str(), unit_.c_str());
-    for (size_t i = 0; i < frame_.size(); ++i) std::fprintf(f, "%.0f,%.2f,%.3f\n", frame_[i], rss_[i], ms_[i]);
-    std::fclose(f);
-    std::filesystem::rename(tmp, csv);
+    std::string csv = unit_ + ",resident_mb," + unit_ + "_ms_median\n";
+    char line[96];
+    for (size_t i = 0; i < frame_.size(); ++i) {
+      std::snprintf(line, sizeof(line), "%.0f,%.2f,%.3f\n", frame_[i], rss_[i], ms_[i]);
+      csv += line;
+    }
+    io::write_file_atomically(prefix_ + ".csv", csv);
   }
   const size_t warm = std::max<size_t>(1, frame_.size() / 10);
   const size_t n = frame_.size() - warm, quarter = std::max<size_t>(1, n / 4);

@@ -1,4 +1,5 @@
 #include "artrace/io/fusion.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/parse_error.h"
 
 #include "artrace/core/srgb.h"
@@ -63,20 +64,37 @@ ar::RoomMesh fuse_recording(ar::FrameSource& recording, const FusionOptions& o, 
 }
 
 void write_room_ply(const ar::RoomMesh& m, const std::filesystem::path& path) {
-  open3d::geometry::TriangleMesh mesh;
-  for (const glm::vec3& v : m.positions) mesh.vertices_.emplace_back(v.x, v.y, v.z);
-  for (const glm::vec3& c : m.colours) {
-    mesh.vertex_colors_.emplace_back(core::linear_to_srgb8(c.r) / 255.0, core::linear_to_srgb8(c.g) / 255.0, core::linear_to_srgb8(c.b) / 255.0);
+  // Written here rather than by Open3D: its PLY writer reports success when the disk fills (its
+  // RPly's failed close is not passed on), leaving a cut mesh. Binary PLY, little-endian: each
+  // vertex x, y, z (float) and its sRGB colour (uchar), each face three vertex indices (int).
+  std::string out = "ply\nformat binary_little_endian 1.0\ncomment artrace fuse\nelement vertex " + std::to_string(m.positions.size()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+                    "property uchar blue\nelement face " + std::to_string(m.triangles.size()) +
+                    "\nproperty list uchar int vertex_indices\nend_header\n";
+  out.reserve(out.size() + m.positions.size() * 15 + m.triangles.size() * 13);
+  auto put32 = [&out](uint32_t u) {
+    for (int b = 0; b < 4; ++b) out.push_back(static_cast<char>((u >> (8 * b)) & 0xffu));
+  };
+  auto put_float = [&put32](float f) {
+    uint32_t u;
+    std::memcpy(&u, &f, sizeof(u));
+    put32(u);
+  };
+  for (size_t i = 0; i < m.positions.size(); ++i) {
+    const glm::vec3& v = m.positions[i];
+    const glm::vec3 c = i < m.colours.size() ? m.colours[i] : glm::vec3(0.5f);
+    put_float(v.x);
+    put_float(v.y);
+    put_float(v.z);
+    for (const float x : {c.r, c.g, c.b}) out.push_back(static_cast<char>(core::linear_to_srgb8(x)));
   }
-  for (const glm::uvec3& t : m.triangles) mesh.triangles_.emplace_back(t.x, t.y, t.z);
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-  // Open3D picks the format by the extension: the temporary name keeps ".ply" at its end
-  const std::filesystem::path tmp = path.parent_path() / (path.stem().string() + ".partial.ply");
-  if (!open3d::io::WriteTriangleMesh(tmp.string(), mesh, /*write_ascii=*/false, /*compressed=*/false)) {
-    std::filesystem::remove(tmp);
-    throw std::runtime_error(path.string() + ": cannot write the mesh");
+  for (const glm::uvec3& t : m.triangles) {
+    out.push_back(3);
+    put32(t.x);
+    put32(t.y);
+    put32(t.z);
   }
-  std::filesystem::rename(tmp, path);
+  write_file_atomically(path, out);
 }
 
 ar::RoomMesh read_room_ply(const std::filesystem::path& path) {

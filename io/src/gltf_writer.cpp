@@ -1,4 +1,5 @@
 #include "artrace/io/gltf_model.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/file_name.h"
 
 #include <tiny_gltf.h>
@@ -9,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <sstream>
 #include <stdexcept>
 
 namespace artrace::io {
@@ -177,15 +179,13 @@ void write_gltf(const GltfModel& model, const std::filesystem::path& path) {
     }
     m.animations.push_back(a);
   }
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  // serialised in memory (the buffer embedded), then written with every step checked: tinygltf's
+  // own file writer reports success when the disk is full
   const bool binary = lower_extension(path) == ".glb";
-  const std::filesystem::path tmp = path.string() + (binary ? ".partial.glb" : ".partial.gltf");
+  std::ostringstream bytes;
   tinygltf::TinyGLTF writer;
-  if (!writer.WriteGltfSceneToFile(&m, tmp.string(), true, true, true, binary)) {
-    std::filesystem::remove(tmp);
-    throw std::runtime_error(path.string() + ": cannot write glTF");
-  }
-  std::filesystem::rename(tmp, path);
+  if (!writer.WriteGltfSceneToStream(&m, bytes, /*prettyPrint=*/true, binary)) throw std::runtime_error(path.string() + ": cannot write glTF");
+  write_file_atomically(path, bytes.str());
 }
 
 GltfModel make_spinning_box(float size, const glm::vec3& color) {

@@ -1,4 +1,5 @@
 #include "artrace/io/recording_writer.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/file_name.h"
 #include "artrace/io/oni_writer.h"
 #include "artrace/io/tum_reader.h"
@@ -7,8 +8,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include <cmath>
-#include <fstream>
 #include <iomanip>
+#include <sstream>
 
 namespace artrace::io {
 namespace {
@@ -37,8 +38,6 @@ class TumWriter : public RecordingWriter {
     std::filesystem::remove_all(tmp_);
     std::filesystem::create_directories(tmp_ / "rgb");
     std::filesystem::create_directories(tmp_ / "depth");
-    rgb_.open(tmp_ / "rgb.txt");
-    depth_.open(tmp_ / "depth.txt");
     rgb_ << "# color images\n# timestamp filename\n" << std::fixed << std::setprecision(6);
     depth_ << "# depth maps (16-bit PNG, 5000 per metre, 0 = no reading)\n# timestamp filename\n" << std::fixed
            << std::setprecision(6);
@@ -55,25 +54,25 @@ class TumWriter : public RecordingWriter {
     const cv::Mat rgb(f.color.height, f.color.width, CV_8UC3, const_cast<uint8_t*>(f.color.rgb.data()));
     cv::Mat bgr;
     cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
-    if (!cv::imwrite((tmp_ / "rgb" / name).string(), bgr)) throw std::runtime_error(tmp_.string() + ": cannot write PNG");
+    write_png(tmp_ / "rgb" / name, bgr, /*atomically=*/false);  // the folder is partial until close
     std::vector<uint16_t> d = depth_units(f.depth, 5000.0);
     const cv::Mat dm(f.depth.height, f.depth.width, CV_16UC1, d.data());
     std::snprintf(name, sizeof(name), "%.6f.png", f.depth_time_s);
-    if (!cv::imwrite((tmp_ / "depth" / name).string(), dm)) throw std::runtime_error(tmp_.string() + ": cannot write PNG");
+    write_png(tmp_ / "depth" / name, dm, /*atomically=*/false);
     rgb_ << f.color_time_s << " rgb/" << std::setprecision(6) << f.color_time_s << ".png\n";
     depth_ << f.depth_time_s << " depth/" << f.depth_time_s << ".png\n";
     add_pose(poses_, f);
     intrinsics_ = f.color_intrinsics;
   }
   void close() override {
-    rgb_.close();
-    depth_.close();
+    write_file(tmp_ / "rgb.txt", rgb_.str());
+    write_file(tmp_ / "depth.txt", depth_.str());
     if (!poses_.empty()) write_tum_trajectory(tmp_ / "groundtruth.txt", ar::Trajectory(poses_));
-    std::ofstream k(tmp_ / "intrinsics.txt");
+    std::ostringstream k;
     k << "# fx fy cx cy width height (pixels)\n"
       << std::setprecision(10) << intrinsics_.fx << ' ' << intrinsics_.fy << ' ' << intrinsics_.cx << ' '
       << intrinsics_.cy << ' ' << intrinsics_.width << ' ' << intrinsics_.height << '\n';
-    k.close();
+    write_file(tmp_ / "intrinsics.txt", k.str());
     std::filesystem::remove_all(dir_);
     std::filesystem::rename(tmp_, dir_);
     closed_ = true;
@@ -81,7 +80,7 @@ class TumWriter : public RecordingWriter {
 
  private:
   std::filesystem::path dir_, tmp_;
-  std::ofstream rgb_, depth_;
+  std::ostringstream rgb_, depth_;  ///< rgb.txt and depth.txt, written at close
   std::vector<ar::PoseSample> poses_;
   ar::PinholeIntrinsics intrinsics_;
   bool closed_ = false;

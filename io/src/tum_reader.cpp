@@ -1,4 +1,5 @@
 #include "artrace/io/tum_reader.h"
+#include "artrace/io/atomic_file.h"
 #include "artrace/io/parse_error.h"
 #include "cv_convert.h"
 
@@ -135,19 +136,14 @@ ar::PinholeIntrinsics read_intrinsics(const std::filesystem::path& path) {
 }
 
 void write_tum_trajectory(const std::filesystem::path& path, const ar::Trajectory& trajectory) {
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
-  const std::filesystem::path tmp = path.string() + ".partial";
-  {
-    std::ofstream out(tmp);
-    out << "# timestamp tx ty tz qx qy qz qw\n" << std::setprecision(9);
-    for (const ar::PoseSample& s : trajectory.samples()) {
-      out << std::fixed << std::setprecision(6) << s.time_s << std::setprecision(9) << ' ' << s.translation.x() << ' '
-          << s.translation.y() << ' ' << s.translation.z() << ' ' << s.rotation.x() << ' ' << s.rotation.y() << ' '
-          << s.rotation.z() << ' ' << s.rotation.w() << '\n';
-    }
-    if (!out) throw std::runtime_error(path.string() + ": cannot write");
+  std::ostringstream out;
+  out << "# timestamp tx ty tz qx qy qz qw\n" << std::setprecision(9);
+  for (const ar::PoseSample& s : trajectory.samples()) {
+    out << std::fixed << std::setprecision(6) << s.time_s << std::setprecision(9) << ' ' << s.translation.x() << ' '
+        << s.translation.y() << ' ' << s.translation.z() << ' ' << s.rotation.x() << ' ' << s.rotation.y() << ' '
+        << s.rotation.z() << ' ' << s.rotation.w() << '\n';
   }
-  std::filesystem::rename(tmp, path);
+  write_file_atomically(path, out.str());
 }
 
 std::vector<std::pair<size_t, size_t>> associate(const std::vector<TimedFile>& color,

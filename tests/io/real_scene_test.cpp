@@ -1,6 +1,7 @@
 // The real scene as geometry, on synthetic recordings of the demo room with Kinect-like noise
 // (where the truth is known exactly): anchors on the floor and the table, the fused room's
 // accuracy against the room's own triangles, and stable occlusion where a model touches the floor.
+#include "artrace/core/srgb.h"
 #include "artrace/ar/compositor.h"
 #include "artrace/ar/plane_fit.h"
 #include "artrace/io/ar_scene.h"
@@ -175,12 +176,21 @@ TEST(RealScene, FusedRoomLiesWithinOneCentimetreOfTheTrueSurfaces) {
   }
   const double rms = std::sqrt(ss / n);
   EXPECT_LT(rms, 0.01) << "over " << n << " vertices, " << far << " more than 5 cm off";
-  // the mesh written and read back as PLY
+  // the mesh written as PLY and read back by Open3D: every vertex to the bit, every triangle, and
+  // each colour as its 8-bit sRGB value gives it
   const auto ply = noisy.parent_path() / "artrace_room.ply";
   write_room_ply(mesh, ply);
   const ar::RoomMesh back = read_room_ply(ply);
-  EXPECT_EQ(back.triangles.size(), mesh.triangles.size());
-  EXPECT_EQ(back.positions.size(), mesh.positions.size());
+  ASSERT_EQ(back.triangles.size(), mesh.triangles.size());
+  ASSERT_EQ(back.positions.size(), mesh.positions.size());
+  ASSERT_EQ(back.colours.size(), mesh.colours.size());
+  EXPECT_TRUE(back.positions == mesh.positions);
+  EXPECT_TRUE(back.triangles == mesh.triangles);
+  size_t colours_off = 0;
+  for (size_t i = 0; i < mesh.colours.size(); ++i) {
+    for (int k = 0; k < 3; ++k) colours_off += back.colours[i][k] != core::srgb8_to_linear(core::linear_to_srgb8(mesh.colours[i][k]));
+  }
+  EXPECT_EQ(colours_off, 0u);
 }
 
 struct ContactFigures {
