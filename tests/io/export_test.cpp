@@ -130,6 +130,9 @@ TEST(Cli, OutputNamesChooseTheFormatOrAreRefused) {
   std::filesystem::remove_all(dir);
 }
 
+/// An AR scene with the green box 2 m in front of a camera at the world's origin (and the light there).
+std::filesystem::path box_ahead_of_origin(const std::filesystem::path& dir) { return box_scene(dir, "[0.0, 0.0, 2.0]", 2.0, "[0, 0, 0]"); }
+
 /// A trajectory that does not cover a frame (here it starts half-way, with samples 0.5 s apart)
 /// gives that frame no camera: the frame is exported as recorded, with a warning naming it,
 /// instead of with the models placed by a camera at the origin. A frame the trajectory does cover
@@ -138,7 +141,7 @@ TEST(Export, FramesWithoutAPoseAreLeftAsRecordedWithAWarning) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_no_pose");
   std::filesystem::remove_all(dir);
-  const auto scene = box_scene(dir, "[0.0, 0.0, 2.0]", 2.0, "[0, 0, 0]");  // 2 m in front of a camera at the origin
+  const auto scene = box_ahead_of_origin(dir);
   const auto poses = dir / "poses.txt";
   std::ofstream(poses) << "1.5 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n";
   const auto room = kRoot / "data/recordings/room";
@@ -190,7 +193,7 @@ TEST(Export, RecordingWithoutATrajectoryIsCompositedWithAFixedCameraAndAWarning)
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_no_trajectory");
   std::filesystem::remove_all(dir);
-  const auto scene = box_scene(dir, "[0.0, 0.0, 2.0]", 2.0, "[0, 0, 0]");  // 2 m in front of a camera at the origin
+  const auto scene = box_ahead_of_origin(dir);
   const auto rec = dir / "rec";
   std::filesystem::copy(kRoot / "data/recordings/room", rec, std::filesystem::copy_options::recursive);
   std::filesystem::remove(rec / "groundtruth.txt");
