@@ -8,13 +8,14 @@
 // Relative paths are taken from the manifest's folder.
 #include "commands.h"
 
+#include "artrace/io/text_file.h"
+
 #include <nlohmann/json.hpp>
 
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdio>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -35,11 +36,9 @@ struct Job {
 };
 
 std::vector<Job> read_manifest(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  if (!in) throw std::runtime_error(file.string() + ": cannot open");
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(in);
+    j = nlohmann::json::parse(io::read_text_file(file));
   } catch (const nlohmann::json::parse_error& e) {
     throw std::runtime_error(file.string() + ": " + e.what());
   }

@@ -2,10 +2,10 @@
 
 #include "artrace/io/atomic_file.h"
 #include "artrace/io/file_name.h"
+#include "artrace/io/text_file.h"
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <iterator>
 #include <stdexcept>
 
@@ -61,15 +61,15 @@ void write_shard_info(const ShardInfo& s) {
 ShardInfo read_shard_info(const std::filesystem::path& folder) {
   const std::filesystem::path file = folder / kShardManifest;
   if (!std::filesystem::is_directory(folder)) throw std::runtime_error(folder.string() + ": not a folder of an export's frames");
-  std::ifstream in(file);
-  if (!in) {
+  if (!std::filesystem::exists(file)) {
     throw std::runtime_error(folder.string() + ": not a complete shard (no " + kShardManifest +
                              "; an export of it that did not finish leaves only a .partial folder)");
   }
   ShardInfo s;
   s.folder = folder;
+  const std::string text = io::read_text_file(file);
   try {
-    const nlohmann::json j = nlohmann::json::parse(in);
+    const nlohmann::json j = nlohmann::json::parse(text);
     s.recording = j.at("recording").get<std::string>();
     s.first = j.at("first").get<int64_t>();
     s.end = j.at("end").get<int64_t>();

@@ -1,13 +1,13 @@
 // AFF parser: one pass over each file's tokens, includes expanded in place.
 #include "artrace/io/aff_scene.h"
 #include "artrace/io/parse_error.h"
+#include "artrace/io/text_file.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 
 #include <algorithm>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <sstream>
 
@@ -130,14 +130,8 @@ class Parser {
       fail(*from, *at, "include cycle: " + chain + key.filename().string());
     }
     if (depth > kMaxIncludeDepth) fail(*from, *at, "includes nested deeper than 32");
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-      if (from) fail(*from, *at, "cannot open included file '" + path.string() + "'");
-      throw ParseError(path.string(), 0, 0, "cannot open file");
-    }
-    std::ostringstream buf;
-    buf << in.rdbuf();
-    Lexer lex(path.string(), buf.str());
+    if (from && !std::filesystem::exists(path)) fail(*from, *at, "cannot open included file '" + path.string() + "'");
+    Lexer lex(path.string(), read_text_file(path));
     const std::filesystem::path dir = path.parent_path();
     Token tok;
     reading_.push_back(key);

@@ -1,12 +1,12 @@
 #include "artrace/io/ar_scene.h"
 #include "artrace/io/parse_error.h"
+#include "artrace/io/text_file.h"
 
 #include <glm/gtc/matrix_transform.hpp>
 #include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <set>
 #include <sstream>
 
@@ -87,11 +87,9 @@ glm::mat4 ArModelPlacement::world_from_model() const {
 }
 
 ArSceneFile load_ar_scene(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
   json root;
   try {
-    root = json::parse(in);
+    root = json::parse(read_text_file(path));
   } catch (const json::parse_error& e) {
     throw ParseError(path.string(), 0, 0, std::string("not valid JSON: ") + e.what());
   }

@@ -1,13 +1,13 @@
 #include "artrace/io/intrinsics_file.h"
 #include "artrace/io/file_name.h"
 #include "artrace/io/parse_error.h"
+#include "artrace/io/text_file.h"
 #include "artrace/io/tum_reader.h"
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 namespace artrace::io {
@@ -59,11 +59,9 @@ int image_size(const std::filesystem::path& path, const char* key, double v) {
 CameraFile read_json(const std::filesystem::path& path) {
   CameraFile c;
   c.file = path;
-  std::ifstream in(path);
-  if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(in);
+    j = nlohmann::json::parse(read_text_file(path));
   } catch (const nlohmann::json::parse_error& e) {
     throw ParseError(path.string(), 0, 0, std::string("not valid JSON: ") + e.what());
   }
@@ -110,9 +108,7 @@ CameraFile read_yaml(const std::filesystem::path& path) {
   cv::FileStorage fs;
   try {
     // OpenCV's parser wants its "%YAML:1.0" header, which ROS camera files do not carry
-    std::ifstream in(path);
-    if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text = read_text_file(path);
     if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
     if (!fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
       throw ParseError(path.string(), 0, 0, "not a readable YAML camera file");

@@ -1,6 +1,7 @@
 #include "artrace/io/tum_reader.h"
 #include "artrace/io/atomic_file.h"
 #include "artrace/io/parse_error.h"
+#include "artrace/io/text_file.h"
 #include "cv_convert.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -8,7 +9,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
@@ -42,16 +42,13 @@ double parse_number(const std::string& s, const std::filesystem::path& file, int
   return v;
 }
 
-std::ifstream open_text(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) throw ParseError(path.string(), 0, 0, "cannot open file");
-  return in;
-}
+/// The file's text as a stream of lines, read with a text file's checks (read_text_file).
+std::istringstream open_text(const std::filesystem::path& path) { return std::istringstream(read_text_file(path)); }
 
 }  // namespace
 
 std::vector<TimedFile> read_tum_list(const std::filesystem::path& path) {
-  std::ifstream in = open_text(path);
+  std::istringstream in = open_text(path);
   std::vector<TimedFile> out;
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
@@ -70,7 +67,7 @@ std::vector<TimedFile> read_tum_list(const std::filesystem::path& path) {
 }
 
 ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
-  std::ifstream in = open_text(path);
+  std::istringstream in = open_text(path);
   std::vector<ar::PoseSample> samples;
   std::string line;
   for (int n = 1; std::getline(in, line); ++n) {
@@ -105,7 +102,7 @@ ar::Trajectory read_tum_trajectory(const std::filesystem::path& path) {
 }
 
 ar::PinholeIntrinsics read_intrinsics(const std::filesystem::path& path) {
-  std::ifstream in = open_text(path);
+  std::istringstream in = open_text(path);
   std::string line;
   std::vector<std::string> w;
   int n = 0;

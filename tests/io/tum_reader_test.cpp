@@ -1,11 +1,20 @@
+#include "artrace/io/ar_scene.h"
+#include "artrace/io/aff_scene.h"
+#include "artrace/io/intrinsics_file.h"
 #include "artrace/io/parse_error.h"
 #include "artrace/io/recording.h"
+#include "artrace/io/text_file.h"
 #include "artrace/io/tum_reader.h"
 #include "../test_util.h"
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <cstdlib>
 #include <fstream>
+#include <functional>
 
 namespace artrace::io {
 namespace {
@@ -174,6 +183,77 @@ TEST(Tum, TrajectoryWithoutPosesIsRefused) {
     }
   }
   std::filesystem::remove_all(dir);
+}
+
+/// Text inputs are read whole with a text file's checks: a NUL byte is refused with its line and
+/// byte (across the reader's 64 KiB chunks too), and so is a file past the size bound; a text file
+/// comes back byte for byte.
+TEST(TextFile, NulBytesAndOversizedInputsAreRefused) {
+  const auto dir = ::artrace::test::scratch_path("artrace_text_file");
+  std::filesystem::create_directories(dir);
+  const auto path = dir / "t.txt";
+  std::string text;
+  for (int i = 0; text.size() < 200000; ++i) text += "line " + std::to_string(i) + "\n";
+  std::ofstream(path, std::ios::binary) << text;
+  EXPECT_EQ(read_text_file(path), text);
+  auto error = [](const std::filesystem::path& p, size_t max_bytes) -> std::string {
+    try {
+      read_text_file(p, max_bytes);
+    } catch (const ParseError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(error(path, 199999).find(path.string() + ": runs past 199999 bytes"), std::string::npos);
+  EXPECT_EQ(error(path, text.size()), "") << "the bound itself is accepted";
+  std::string with_nul = text;
+  with_nul[150000] = '\0';
+  std::ofstream(path, std::ios::binary) << with_nul;
+  const int line = 1 + static_cast<int>(std::count(with_nul.begin(), with_nul.begin() + 150000, '\n'));
+  EXPECT_NE(error(path, kMaxTextBytes).find(path.string() + ":" + std::to_string(line) + ": a NUL byte at byte 150000: not a text file"),
+            std::string::npos)
+      << error(path, kMaxTextBytes);
+  EXPECT_NE(error(dir / "missing.txt", kMaxTextBytes).find("missing.txt: cannot open file"), std::string::npos);
+  std::filesystem::remove_all(dir);
+}
+
+/// Every text reader given /dev/zero (an endless run of NUL bytes, as a binary file given by
+/// mistake begins): refused at once, naming it. Each was read as one endless line until memory ran
+/// out. The commands too, under a time limit that a hang would exceed.
+TEST(TextFile, EveryTextReaderRefusesDevZero) {
+  if (!std::filesystem::exists("/dev/zero")) GTEST_SKIP() << "no /dev/zero on this system";
+  const std::filesystem::path zero = "/dev/zero";
+  const std::vector<std::pair<const char*, std::function<void()>>> readers = {
+      {"trajectory", [&] { read_tum_trajectory(zero); }},
+      {"frame list", [&] { read_tum_list(zero); }},
+      {"intrinsics.txt", [&] { read_intrinsics(zero); }},
+      {"camera file", [&] { read_camera_file(zero); }},
+      {"AR scene", [&] { load_ar_scene(zero); }},
+      {"AFF scene", [&] { load_aff(zero); }},
+  };
+  for (const auto& [what, read] : readers) {
+    try {
+      read();
+      ADD_FAILURE() << what << ": read /dev/zero";
+    } catch (const ParseError& e) {
+      EXPECT_NE(std::string(e.what()).find("/dev/zero:1: a NUL byte at byte 0: not a text file"), std::string::npos) << what << ": " << e.what();
+    }
+  }
+#ifdef ARTRACE_BINARY
+  if (!std::filesystem::exists(ARTRACE_BINARY)) return;
+  const auto log = ::artrace::test::scratch_path("artrace_dev_zero.log");
+  const std::string room = (std::filesystem::path(ARTRACE_SOURCE_DIR) / "data/recordings/room").string();
+  const std::string demo = (std::filesystem::path(ARTRACE_SOURCE_DIR) / "data/ar/demo.json").string();
+  const std::string commands[] = {"export " + room + " --scene " + demo + " --trajectory /dev/zero -o x",
+                                  "export " + room + " --scene " + demo + " --intrinsics /dev/zero -o x",
+                                  "render /dev/zero -o x.png", "batch /dev/zero", "info /dev/zero"};
+  for (const std::string& args : commands) {
+    const int status = std::system(("timeout 60 " + std::string(ARTRACE_BINARY) + " " + args + " > " + log.string() + " 2>&1").c_str());
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << args << ": status " << status;
+    EXPECT_NE(::artrace::test::read_file(log).find("/dev/zero"), std::string::npos) << args << ": " << ::artrace::test::read_file(log);
+  }
+  std::filesystem::remove(log);
+#endif
 }
 
 /// Every reader over every broken input: a ParseError naming the file, never a crash.
