@@ -2,6 +2,7 @@
 #include "artrace/io/parse_error.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -10,7 +11,7 @@ namespace artrace::io {
 
 std::string read_text_file(const std::filesystem::path& path, std::size_t max_bytes) {
   const std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
-  if (!f) throw ParseError(path.string(), 0, 0, "cannot open file");
+  if (!f) throw ParseError(path.string(), 0, 0, std::string("cannot open file: ") + std::strerror(errno));
   std::string text;
   char chunk[1 << 16];
   for (;;) {
