@@ -17,7 +17,6 @@
 #include <tbb/task_arena.h>
 
 #include <cstdio>
-#include <fstream>
 #include <memory>
 
 namespace artrace::tools {

@@ -43,7 +43,12 @@ void write_file_atomically(const std::filesystem::path& path, std::string_view b
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
   const std::filesystem::path partial = path.string() + ".partial";
   if (const int err = write_checked(partial, bytes)) cannot_write(path, err);
-  std::filesystem::rename(partial, path);
+  std::error_code ec;
+  std::filesystem::rename(partial, path, ec);  // fails where `path` is a folder, say
+  if (ec) {
+    std::filesystem::remove(partial);
+    throw std::runtime_error(path.string() + ": cannot write: " + ec.message());
+  }
 }
 
 void write_png(const std::filesystem::path& path, const cv::Mat& image, bool atomically) {

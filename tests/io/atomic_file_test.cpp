@@ -68,6 +68,11 @@ TEST(AtomicFile, WrittenWholeOrNotAtAllAndTheFullDiskNamed) {
   EXPECT_TRUE(throws_with([] { write_file("/dev/full", "abc"); }, "/dev/full: cannot write: No space left on device"));
   EXPECT_TRUE(std::filesystem::exists("/dev/full"));
   EXPECT_TRUE(throws_with([&] { write_file(dir / "no" / "such" / "folder", "abc"); }, "cannot write: No such file or directory"));
+  // a folder where the file should go: refused, and the .partial gone
+  std::filesystem::create_directories(dir / "taken" / "inside");
+  EXPECT_TRUE(throws_with([&] { write_file_atomically(dir / "taken", "abc"); }, (dir / "taken").string() + ": cannot write: "));
+  EXPECT_TRUE(nothing_at(dir.string() + "/taken.partial"));
+  EXPECT_TRUE(std::filesystem::is_directory(dir / "taken" / "inside"));
   std::filesystem::remove_all(dir);
 }
 
