@@ -9,6 +9,7 @@
 #include "ar_session.h"
 #include "clip_writer.h"
 #include "shards.h"
+#include "stop_signals.h"
 
 #include "artrace/ar/compositor.h"
 #include "artrace/io/ar_scene.h"
@@ -17,17 +18,11 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <memory>
 
 namespace artrace::tools {
 namespace {
-
-std::atomic<bool> g_interrupted{false};
-
-extern "C" void on_sigint(int) { g_interrupted = true; }
 
 struct Options {
   std::string recording, output, frames;
@@ -68,8 +63,7 @@ void run(const Options& opt) {
   ar::CompositeOptions& copt = session.options();
   copt.occlusion = !opt.no_occlusion;
   copt.shadows = !opt.no_shadows;
-  g_interrupted = false;
-  auto previous = std::signal(SIGINT, on_sigint);
+  auto stop = std::make_unique<StopSignals>();  // until the frames are written
   const int64_t total = last - first + 1;
   const auto start = std::chrono::steady_clock::now();
   std::vector<double> real_rays;
@@ -80,7 +74,7 @@ void run(const Options& opt) {
     FrameReader reader(source);
     ar::SensorFrame f;
     for (int64_t k = 0; k < total; ++k) {
-      if (g_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
+      StopSignals::throw_if_stopped(out);
       double rm = 0.0;
       if (!reader.next(f, &rm)) throw std::runtime_error(opt.recording + ": ended at frame " + std::to_string(first + k));
       read_ms.push_back(rm);
@@ -116,12 +110,12 @@ void run(const Options& opt) {
     }
     if (writer) writer->finish();
   } catch (...) {
-    std::signal(SIGINT, previous);
+    stop.reset();
     if (!opt.quiet) std::fprintf(stderr, "\n");
     cleanup();
     throw;
   }
-  std::signal(SIGINT, previous);
+  stop.reset();
   if (!video) {
     // a folder of frames is a shard: it says which frames of which recording it holds, for join
     try {

@@ -5,20 +5,15 @@
 #include "clip_writer.h"
 #include "commands.h"
 #include "shards.h"
+#include "stop_signals.h"
 
 #include <opencv2/imgcodecs.hpp>
 
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <memory>
 
 namespace artrace::tools {
 namespace {
-
-std::atomic<bool> g_join_interrupted{false};
-
-extern "C" void on_join_sigint(int) { g_join_interrupted = true; }
 
 struct JoinOptions {
   std::vector<std::string> shards;
@@ -65,12 +60,11 @@ void run_join(const JoinOptions& opt) {
   const double fps = opt.fps > 0.0 ? opt.fps : a.fps;
   ClipOptions clip = opt.clip;
   clip.fps = fps;
-  g_join_interrupted = false;
-  auto previous = std::signal(SIGINT, on_join_sigint);
+  auto stop = std::make_unique<StopSignals>();  // until the frames are written
   const auto start = std::chrono::steady_clock::now();
   try {
     for (int64_t k = range.first; k < range.end; ++k) {
-      if (g_join_interrupted) throw std::runtime_error("interrupted: " + out.string() + " was not written");
+      StopSignals::throw_if_stopped(out);
       const std::filesystem::path src = frame_png(holder[k - range.first]->folder, k);
       if (video) {
         const cv::Mat img = cv::imread(src.string(), cv::IMREAD_COLOR);
@@ -94,14 +88,14 @@ void run_join(const JoinOptions& opt) {
     if (writer) writer->finish();
     if (!video) write_shard_info({partial, a.recording, range.first, range.end, a.recording_frames, a.width, a.height, fps});
   } catch (...) {
-    std::signal(SIGINT, previous);
+    stop.reset();
     if (!opt.quiet) std::fprintf(stderr, "\n");
     writer.reset();
     std::error_code ec;
     std::filesystem::remove_all(partial, ec);
     throw;
   }
-  std::signal(SIGINT, previous);
+  stop.reset();
   std::filesystem::remove_all(out);
   std::filesystem::rename(partial, out);
   const double ms = ms_since(start);

@@ -260,6 +260,24 @@ TEST(Export, StoppedExportLeavesNoFile) {
   EXPECT_NE(status, 0) << "the export was stopped";
   EXPECT_FALSE(std::filesystem::exists(clip));
   EXPECT_FALSE(std::filesystem::exists(dir / "interrupted.partial.avi"));
+  // SIGTERM (kill's default; what Slurm sends a job at its time limit, or cancelled, before
+  // SIGKILL) and SIGHUP (the terminal closed) stop it the same way: a shard's partial folder and a
+  // clip's partial file are removed, and the message names the signal
+  const auto log = dir / "log.txt";
+  for (const auto& [signal, name] : {std::pair<const char*, const char*>{"TERM", "shard"}, {"TERM", "clip.mp4"}, {"HUP", "hup.avi"}}) {
+    const auto out = dir / name;
+    const int st = run("timeout --preserve-status -s " + std::string(signal) + " 0.4 " + std::string(ARTRACE_BINARY) + " export " + big.string() +
+                       " --scene " + scene.string() + " -o " + out.string() + " --side-by-side --threads 1 -q > " + log.string() +
+                       " 2>&1");
+    EXPECT_EQ(st, 1) << signal << " " << name << ": " << ::artrace::test::read_file(log);
+    EXPECT_NE(::artrace::test::read_file(log).find("stopped by SIG" + std::string(signal) + ": " + out.string() + " was not written"),
+              std::string::npos)
+        << ::artrace::test::read_file(log);
+    for (const auto& e : std::filesystem::directory_iterator(dir)) {
+      EXPECT_EQ(e.path().filename().string().rfind(std::filesystem::path(name).stem().string(), 0), std::string::npos)
+          << signal << ": " << e.path() << " left behind";
+    }
+  }
   std::filesystem::remove_all(dir);
 }
 
