@@ -438,9 +438,35 @@ GltfModel load_gltf(const std::filesystem::path& path) {
     }
     const auto i = mat.extensions.find("KHR_materials_ior");
     if (i != mat.extensions.end() && i->second.Has("ior")) g.ior = to_float(i->second.Get("ior").GetNumberAsDouble(), file, at + " ior");
+    // Factors outside glTF's ranges were used as given (a metallic factor of 5 gave back five times
+    // the light): each is taken at its range's nearest bound, with a warning.
+    // `unit`: the range is 0-1, else 0 and more
+    auto bounded = [&](float& v, const char* what, bool unit) {
+      const float b = unit ? std::clamp(v, 0.0f, 1.0f) : std::max(v, 0.0f);
+      if (b == v) return;
+      std::ostringstream w;
+      w << file << ": " << at << " " << what << " " << v << (unit ? " lies outside 0-1" : " lies below 0") << " (glTF's range): taken as " << b;
+      out.warnings.push_back(w.str());
+      v = b;
+    };
+    for (int k = 0; k < 3; ++k) bounded(g.base_color[k], "baseColorFactor", true);
+    bounded(g.alpha, "alpha", true);
+    bounded(g.metallic, "metallicFactor", true);
+    bounded(g.roughness, "roughnessFactor", true);
+    bounded(g.occlusion_texture.scale, "occlusionTexture strength", true);
+    for (int k = 0; k < 3; ++k) bounded(g.emissive[k], "emissiveFactor", false);
+    bounded(g.transmission, "transmissionFactor", true);
+    if (g.ior != 0.0f && !(g.ior >= 1.0f)) {
+      std::ostringstream w;
+      w << file << ": " << at << " ior " << g.ior << " is neither 0 nor 1 or more (KHR_materials_ior): taken as 1.5";
+      out.warnings.push_back(w.str());
+      g.ior = 1.5f;
+    }
     const auto es = mat.extensions.find("KHR_materials_emissive_strength");
     if (es != mat.extensions.end() && es->second.Has("emissiveStrength")) {
-      g.emissive *= to_float(es->second.Get("emissiveStrength").GetNumberAsDouble(), file, at + " emissiveStrength");
+      float strength = to_float(es->second.Get("emissiveStrength").GetNumberAsDouble(), file, at + " emissiveStrength");
+      bounded(strength, "emissiveStrength", false);
+      g.emissive *= strength;
     }
     out.materials.push_back(g);
   }

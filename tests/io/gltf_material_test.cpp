@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <fstream>
 #include <set>
 
@@ -408,6 +409,53 @@ TEST(GltfGeometry, UnsupportedRequiredExtensionIsAnErrorOptionalOnesAWarning) {
       EXPECT_NE(std::string(e.what()).find(name[0] == 'm' ? "nowhere.png" : "broken"), std::string::npos) << e.what();
     }
   }
+}
+
+/// Material factors outside glTF's ranges (metallic, roughness, base colour, alpha, transmission
+/// and occlusion strength 0-1, emissive 0 or more, an IOR of 0 or 1 and more) were used as
+/// given: a metallic factor of 5 shaded five times the light it receives. Each is now taken at its
+/// range's nearest bound (an invalid IOR as glTF's default, 1.5), with a warning naming the file,
+/// the material, the factor and its value; factors within range pass untouched and unwarned.
+TEST(GltfGeometry, MaterialFactorsOutsideTheirRangesAreBoundedWithAWarning) {
+  const auto dir = test_dir("artrace_gltf_ranges");
+  QuadGltf q = QuadGltf::at(-1, 1, -1, 1, 2);
+  q.material = {{"name", "odd"},
+                {"pbrMetallicRoughness", {{"baseColorFactor", {2.0, 0.5, -0.25, 1.5}}, {"metallicFactor", 5.0}, {"roughnessFactor", -0.5}}},
+                {"emissiveFactor", {0.0, -1.0, 0.0}},
+                {"extensions", {{"KHR_materials_ior", {{"ior", 0.5}}}, {"KHR_materials_transmission", {{"transmissionFactor", 1.5}}}}}};
+  const auto path = dir / "odd.gltf";
+  q.write(path);
+  const GltfModel m = load_gltf(path);
+  ASSERT_EQ(m.materials.size(), 2u);
+  const GltfMaterial& g = m.materials[1];
+  EXPECT_EQ(g.base_color, glm::vec3(1.0f, 0.5f, 0.0f));
+  EXPECT_EQ(g.alpha, 1.0f);
+  EXPECT_EQ(g.metallic, 1.0f);
+  EXPECT_EQ(g.roughness, 0.0f);
+  EXPECT_EQ(g.emissive, glm::vec3(0.0f));
+  EXPECT_EQ(g.transmission, 1.0f);
+  EXPECT_EQ(g.ior, 1.5f);
+  const std::string prefix = path.string() + ": material 'odd' ";
+  for (const std::string expected :
+       {"baseColorFactor 2 lies outside 0-1 (glTF's range): taken as 1", "baseColorFactor -0.25 lies outside 0-1 (glTF's range): taken as 0",
+        "alpha 1.5 lies outside 0-1 (glTF's range): taken as 1", "metallicFactor 5 lies outside 0-1 (glTF's range): taken as 1",
+        "roughnessFactor -0.5 lies outside 0-1 (glTF's range): taken as 0", "emissiveFactor -1 lies below 0 (glTF's range): taken as 0",
+        "transmissionFactor 1.5 lies outside 0-1 (glTF's range): taken as 1",
+        "ior 0.5 is neither 0 nor 1 or more (KHR_materials_ior): taken as 1.5"}) {
+    const bool found = std::any_of(m.warnings.begin(), m.warnings.end(), [&](const std::string& w) { return w == prefix + expected; });
+    EXPECT_TRUE(found) << expected;
+  }
+  EXPECT_EQ(m.warnings.size(), 8u);
+  // the same factors within range: as given, no warning; an IOR of 0 (a mirror) is glTF's own
+  q.material = {{"name", "fine"},
+                {"pbrMetallicRoughness", {{"baseColorFactor", {1.0, 0.0, 0.5, 0.25}}, {"metallicFactor", 1.0}, {"roughnessFactor", 0.0}}},
+                {"extensions", {{"KHR_materials_ior", {{"ior", 0.0}}}}}};
+  q.write(path);
+  const GltfModel fine = load_gltf(path);
+  EXPECT_TRUE(fine.warnings.empty()) << fine.warnings.front();
+  EXPECT_EQ(fine.materials[1].base_color, glm::vec3(1.0f, 0.0f, 0.5f));
+  EXPECT_EQ(fine.materials[1].alpha, 0.25f);
+  EXPECT_EQ(fine.materials[1].ior, 0.0f);
 }
 
 // The image header sniffer that guards OpenCV's decoder, against images OpenCV encodes (the
