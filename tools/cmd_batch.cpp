@@ -7,6 +7,7 @@
 //
 // Relative paths are taken from the manifest's folder.
 #include "commands.h"
+#include "stop_signals.h"
 
 #include "artrace/io/text_file.h"
 
@@ -15,6 +16,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cstdio>
 #include <map>
 #include <memory>
@@ -120,9 +123,11 @@ void run_batch(const BatchOptions& opt) {
   std::map<pid_t, size_t> running;
   std::vector<size_t> failed;
   size_t next = 0, done = 0, skipped = 0;
+  const StopSignals signals(/*restart=*/false);  // wait() returns when one comes
   auto reap = [&] {
     int status = 0;
     const pid_t pid = wait(&status);
+    if (pid < 0 && errno == EINTR) return;  // a stop signal: the loop passes it on
     if (pid < 0) throw std::runtime_error("batch: lost track of a job");
     const size_t i = running.at(pid);
     running.erase(pid);
@@ -132,6 +137,21 @@ void run_batch(const BatchOptions& opt) {
     else failed.push_back(i);
   };
   while (next < todo.size() || !running.empty()) {
+    if (const int s = StopSignals::caught()) {
+      // a stop asked of the batch alone (kill's SIGTERM) goes on to the running jobs, which remove
+      // their partial outputs; no more are started. Without it they ran on, orphaned.
+      std::vector<size_t> stopped;
+      for (const auto& [pid, i] : running) {
+        kill(pid, s);
+        stopped.push_back(i);
+      }
+      while (!running.empty()) reap();
+      std::sort(stopped.begin(), stopped.end());
+      std::string list;
+      for (size_t i : stopped) list += (list.empty() ? "" : ", ") + std::to_string(i);
+      throw std::runtime_error(std::string("batch: stopped by ") + StopSignals::name(s) + (list.empty() ? "" : ": jobs " + list + " stopped") +
+                               ", " + std::to_string(todo.size() - next) + " not started");
+    }
     if (next < todo.size() && static_cast<int>(running.size()) < opt.parallel) {
       const size_t i = todo[next++];
       if (opt.skip_done && std::filesystem::exists(jobs[i].output)) {

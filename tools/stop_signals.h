@@ -1,11 +1,13 @@
-// Stopping an output that is being written: Ctrl-C's SIGINT, SIGTERM (kill's default, and what
-// Slurm sends a job at its time limit or when it is cancelled, before SIGKILL) and SIGHUP (the
-// terminal closed) are caught while a StopSignals lives, and the writing loop asks
-// throw_if_stopped() after each frame. Its exception unwinds to the code that removes the partial
-// output, so a stopped export or join leaves nothing behind, under the final name or a partial one.
+// Stopping a command that writes outputs: Ctrl-C's SIGINT, SIGTERM (kill's default, and what Slurm
+// sends a job at its time limit or when it is cancelled, before SIGKILL) and SIGHUP (the terminal
+// closed) are caught while a StopSignals lives. Export and join ask throw_if_stopped() after each
+// frame; its exception unwinds to the code that removes the partial output, so a stopped export or
+// join leaves nothing behind, under the final name or a partial one. Batch passes the signal on to
+// its jobs.
 #pragma once
 
-#include <atomic>
+#include <signal.h>
+
 #include <csignal>
 #include <filesystem>
 #include <stdexcept>
@@ -14,34 +16,40 @@
 namespace artrace::tools {
 
 namespace detail {
-inline std::atomic<int> g_stop_signal{0};
+inline volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" inline void on_stop_signal(int s) { g_stop_signal = s; }
 }  // namespace detail
 
 class StopSignals {
  public:
-  StopSignals() {
+  /// `restart` false: a blocking call such as wait() returns at once (EINTR) when one comes, rather
+  /// than going on waiting.
+  explicit StopSignals(bool restart = true) {
     detail::g_stop_signal = 0;
-    for (int i = 0; i < 3; ++i) previous_[i] = std::signal(kSignals[i], detail::on_stop_signal);
+    struct sigaction sa = {};
+    sa.sa_handler = detail::on_stop_signal;
+    sa.sa_flags = restart ? SA_RESTART : 0;
+    sigemptyset(&sa.sa_mask);
+    for (int i = 0; i < 3; ++i) sigaction(kSignals[i], &sa, &previous_[i]);
   }
   ~StopSignals() {
-    for (int i = 0; i < 3; ++i) std::signal(kSignals[i], previous_[i]);
+    for (int i = 0; i < 3; ++i) sigaction(kSignals[i], &previous_[i], nullptr);
   }
   StopSignals(const StopSignals&) = delete;
   StopSignals& operator=(const StopSignals&) = delete;
 
+  /// The signal that asked to stop, or 0.
+  static int caught() { return detail::g_stop_signal; }
+  static const char* name(int s) { return s == SIGINT ? "SIGINT" : s == SIGTERM ? "SIGTERM" : "SIGHUP"; }
+
   /// Throws "stopped by SIGTERM: OUT was not written" (or SIGINT, SIGHUP) once one has come.
   static void throw_if_stopped(const std::filesystem::path& out) {
-    const int s = detail::g_stop_signal;
-    if (s == 0) return;
-    const char* name = s == SIGINT ? "SIGINT" : s == SIGTERM ? "SIGTERM" : "SIGHUP";
-    throw std::runtime_error(std::string("stopped by ") + name + ": " + out.string() + " was not written");
+    if (const int s = caught()) throw std::runtime_error(std::string("stopped by ") + name(s) + ": " + out.string() + " was not written");
   }
 
  private:
   static constexpr int kSignals[3] = {SIGINT, SIGTERM, SIGHUP};
-  using Handler = void (*)(int);
-  Handler previous_[3];
+  struct sigaction previous_[3];
 };
 
 }  // namespace artrace::tools

@@ -7,8 +7,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <chrono>
 #include <fstream>
 #include <iterator>
+#include <thread>
 
 namespace artrace::io {
 namespace {
@@ -245,6 +247,33 @@ TEST(Batch, ManifestJobsRunSideBySideAndJoin) {
       << out;
   EXPECT_FALSE(std::filesystem::exists(dir / "same")) << "no job ran";
   std::filesystem::remove_all(dir);
+}
+
+/// A batch stopped by a signal sent to it alone (kill's SIGTERM) passes it on to its running
+/// jobs, which remove their partial outputs, and fails naming the signal. Before, the batch died and
+/// its exports ran on, orphaned, and wrote their outputs.
+TEST(Batch, StoppedBatchStopsItsJobs) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_batch_stop");
+  const auto rec = dir / "rec";
+  synth_room(rec, 120, 320, 240);
+  std::ofstream(dir / "jobs.json") << R"({"jobs": [
+      {"recording": "rec", "scene": ")" << kDemo << R"(", "output": "a.avi", "args": ["--side-by-side"]},
+      {"recording": "rec", "scene": ")" << kDemo << R"(", "output": "b", "args": ["--side-by-side"]}]})";
+  const auto log = dir / "log.txt", rc = dir / "rc.txt";
+  // the batch in the background, SIGTERM to its process alone, its status kept
+  ASSERT_EQ(run("cd " + dir.string() + " && { " + bin() + " batch jobs.json --parallel 2 --threads 1 > " + log.string() +
+                " 2>&1 & p=$!; sleep 1; kill -TERM $p; wait $p; echo $? > " + rc.string() + "; }"),
+            0);
+  EXPECT_EQ(::artrace::test::read_file(rc), "1\n") << ::artrace::test::read_file(log);
+  EXPECT_NE(::artrace::test::read_file(log).find("batch: stopped by SIGTERM: jobs 0, 1 stopped"), std::string::npos)
+      << ::artrace::test::read_file(log);
+  // an orphaned export of these would finish within a few seconds; none does
+  std::this_thread::sleep_for(std::chrono::seconds(4));
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    EXPECT_TRUE(name == "rec" || name == "jobs.json" || name == "log.txt" || name == "rc.txt") << name << " left behind";
+  }
 }
 
 }  // namespace
