@@ -107,6 +107,14 @@ pid_t start(const Job& job, int threads) {
   return pid;
 }
 
+/// "0, 2, 5": job numbers in order, for messages.
+std::string job_list(std::vector<size_t> jobs) {
+  std::sort(jobs.begin(), jobs.end());
+  std::string list;
+  for (size_t i : jobs) list += (list.empty() ? "" : ", ") + std::to_string(i);
+  return list;
+}
+
 void run_batch(const BatchOptions& opt) {
   const std::vector<Job> jobs = read_manifest(opt.manifest);
   std::vector<size_t> todo;
@@ -146,11 +154,9 @@ void run_batch(const BatchOptions& opt) {
         stopped.push_back(i);
       }
       while (!running.empty()) reap();
-      std::sort(stopped.begin(), stopped.end());
-      std::string list;
-      for (size_t i : stopped) list += (list.empty() ? "" : ", ") + std::to_string(i);
-      throw std::runtime_error(std::string("batch: stopped by ") + StopSignals::name(s) + (list.empty() ? "" : ": jobs " + list + " stopped") +
-                               ", " + std::to_string(todo.size() - next) + " not started");
+      throw std::runtime_error(std::string("batch: stopped by ") + StopSignals::name(s) +
+                               (stopped.empty() ? "" : ": jobs " + job_list(stopped) + " stopped") + ", " +
+                               std::to_string(todo.size() - next) + " not started");
     }
     if (next < todo.size() && static_cast<int>(running.size()) < opt.parallel) {
       const size_t i = todo[next++];
@@ -168,9 +174,7 @@ void run_batch(const BatchOptions& opt) {
   }
   std::printf("batch: %zu done, %zu skipped, %zu failed\n", done, skipped, failed.size());
   if (!failed.empty()) {
-    std::string list;
-    for (size_t i : failed) list += (list.empty() ? "" : ", ") + std::to_string(i);
-    throw std::runtime_error("batch: jobs " + list + " failed (see their messages above)");
+    throw std::runtime_error("batch: jobs " + job_list(failed) + " failed (see their messages above)");
   }
 }
 
