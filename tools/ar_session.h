@@ -6,6 +6,7 @@
 #include "bench_util.h"
 #include "commands.h"
 #include "frame_reader.h"
+#include "outputs.h"
 #include "recording_options.h"
 
 #include "artrace/ar/compositor.h"
@@ -24,6 +25,13 @@ struct ArArgs {
   RecordingArgs rec;
   int threads = 0;
 };
+
+/// The files an AR command reads: the recording's (outputs.h) and the scene and room.
+inline std::vector<std::string> ar_inputs(const std::string& recording, const ArArgs& a) {
+  std::vector<std::string> in = recording_inputs(recording, a.rec.intrinsics, a.rec.trajectory);
+  in.insert(in.end(), {a.scene, a.room});
+  return in;
+}
 
 /// --scene (required), --room, the recording options, --depth-shift, --threads.
 inline void add_ar_options(CLI::App* cmd, ArArgs& a) {

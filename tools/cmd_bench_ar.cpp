@@ -35,6 +35,9 @@ std::vector<uint8_t> contact_pixels(const ar::SensorFrame& f, const std::vector<
 }
 
 void run(const Options& opt) {
+  std::vector<Output> outputs = SoakLog::outputs(opt.soak);
+  outputs.push_back({opt.json});
+  check_outputs(outputs, ar_inputs(opt.recording, opt.ar));
   ArSession session(opt.recording, opt.ar);
   ar::CompositeOptions& copt = session.options();
   copt.occlusion = !opt.no_occlusion;

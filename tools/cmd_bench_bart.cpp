@@ -247,6 +247,7 @@ void add_bench_bart_command(CLI::App& app) {
   cmd->add_option("--simd", opt->simd, "packet kernels: auto, scalar, sse, avx2, avx512")->capture_default_str();
   cmd->add_flag("-q,--quiet", opt->quiet, "no progress line");
   cmd->callback([opt] {
+    check_outputs({{opt->json}}, {opt->scene});
     core::set_simd_level(core::parse_simd_level(opt->simd));
     const io::AffScene aff = io::load_aff(opt->scene);
     const CellResult r = run_cell(*opt, aff);

@@ -222,6 +222,7 @@ struct Options {
 void run(const Options& opt) {
   if (opt.embree_robust && opt.reference != "embree")
     throw std::runtime_error("--embree-robust needs --reference embree");
+  check_outputs({{opt.json}}, {opt.scene});
   core::set_simd_level(core::parse_simd_level(opt.simd));
   const int threads = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
   tbb::task_arena arena(threads);

@@ -22,6 +22,7 @@ struct Options : AnimationOptions {
 };
 
 void run(const Options& opt) {
+  check_outputs({{opt.json}}, {opt.scene});
   const int threads = opt.threads > 0 ? opt.threads : tbb::this_task_arena::max_concurrency();
   tbb::task_arena arena(threads);
   const io::AffScene aff = io::load_aff(opt.scene);

@@ -35,6 +35,7 @@ struct Options {
 };
 
 void run(const Options& opt) {
+  check_outputs({{opt.json}, {opt.debug_png}}, {opt.scene});
   const io::AffScene scene = io::load_aff(opt.scene);
   io::SynthOptions so;
   so.frames = opt.frames;

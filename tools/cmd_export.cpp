@@ -34,6 +34,7 @@ struct Options {
 
 void run(const Options& opt) {
   check_output_name(opt.output);
+  check_outputs({{opt.output, clip_or_frames(opt.output)}}, ar_inputs(opt.recording, opt.ar));
   ArSession session(opt.recording, opt.ar, opt.quiet);
   ar::FrameSource& source = session.source();
   const int64_t count = source.frame_count().value_or(0);

@@ -4,6 +4,7 @@
 #include "bench_util.h"
 #include "clip_writer.h"
 #include "commands.h"
+#include "outputs.h"
 #include "shards.h"
 #include "stop_signals.h"
 
@@ -25,6 +26,7 @@ struct JoinOptions {
 
 void run_join(const JoinOptions& opt) {
   check_output_name(opt.output);
+  check_outputs({{opt.output, clip_or_frames(opt.output)}}, opt.shards);
   std::vector<ShardInfo> shards;
   for (const std::string& s : opt.shards) shards.push_back(read_shard_info(s));
   const ShardInfo& a = shards.front();

@@ -11,6 +11,7 @@
 #include "artrace/io/odometry.h"
 #include "artrace/io/oni_file.h"
 #include "artrace/io/oni_reader.h"
+#include "outputs.h"
 #include "recording_options.h"
 #include "shards.h"
 
@@ -285,6 +286,7 @@ void add_recording_commands(CLI::App& app) {
     add_threads_option(cmd, opt->synth.threads);
     cmd->callback([opt] {
       note_recording_output(opt->output);
+      check_outputs(recording_outputs(opt->output), {opt->scene});
       if (opt->kinect) opt->synth.depth_model = ar::DepthModel{};
       const io::AffScene scene = io::load_aff(opt->scene);
       io::Synthesizer synth(scene, opt->synth);
@@ -305,6 +307,7 @@ void add_recording_commands(CLI::App& app) {
     add_recording_options(cmd, *rec);
     cmd->callback([src, dst, rec] {
       note_recording_output(*dst);
+      check_outputs(recording_outputs(*dst), recording_inputs(*src, rec->intrinsics, rec->trajectory));
       auto in = open_recording(*src, *rec);
       auto out = io::make_recording_writer(*dst);
       ar::SensorFrame f;
@@ -333,6 +336,7 @@ void add_recording_commands(CLI::App& app) {
     add_recording_options(cmd, opt->rec);
     add_depth_shift_option(cmd, opt->rec.depth_shift);
     cmd->callback([opt] {
+      check_outputs({{opt->output}, {opt->json}}, recording_inputs(opt->source, opt->rec.intrinsics, opt->rec.trajectory));
       auto in = open_recording(opt->source, opt->rec);
       const auto t0 = std::chrono::steady_clock::now();
       const io::OdometryResult r = io::estimate_trajectory(*in, opt->odometry);
@@ -363,6 +367,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_flag("--planes", *planes, "recordings: list the large planar surfaces of a frame (world coordinates), to anchor models on");
     cmd->add_option("--frame", *frame, "the frame --planes looks at")->capture_default_str()->check(CLI::Range(0, 100000000));
     cmd->callback([path, json, rec, planes, frame] {
+      check_outputs({{*json}}, recording_inputs(*path, rec->intrinsics, rec->trajectory));
       const std::filesystem::path p(*path);
       const std::string ext = io::lower_extension(p);
       const nlohmann::json j = is_video_path(p)                  ? info_video(p)
@@ -398,6 +403,7 @@ void add_recording_commands(CLI::App& app) {
     add_depth_shift_option(cmd, opt->rec.depth_shift);
     cmd->callback([opt] {
       require_output_extension(opt->output, ".ply", "PLY meshes");
+      check_outputs({{opt->output}, {opt->json}}, recording_inputs(opt->source, opt->rec.intrinsics, opt->rec.trajectory));
       auto in = open_recording(opt->source, opt->rec, opt->quiet);
       io::FusionStats st;
       const ar::RoomMesh mesh = io::fuse_recording(*in, opt->fusion, &st, [&](int k, int n) {
@@ -427,6 +433,7 @@ void add_recording_commands(CLI::App& app) {
     cmd->add_option("--json", opt->json, "write the result as JSON");
     add_recording_options(cmd, opt->rec);
     cmd->callback([opt] {
+      check_outputs({{opt->json}}, recording_inputs(opt->source, opt->rec.intrinsics, opt->rec.trajectory));
       auto in = open_recording(opt->source, opt->rec);
       ar::SensorFrame f;
       in->next(f);  // warm-up: first frame, file caches

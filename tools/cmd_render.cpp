@@ -31,6 +31,7 @@ void add_render_command(CLI::App& app) {
   cmd->add_flag("--single", opt->single, "trace single rays instead of packets");
   cmd->callback([opt] {
     require_output_extension(opt->output, ".png", "PNG images");
+    check_outputs({{opt->output}}, {opt->scene});
     core::set_simd_level(core::parse_simd_level(opt->simd));
     const auto t0 = std::chrono::steady_clock::now();
     const io::AffScene scene = io::load_aff(opt->scene);

@@ -334,6 +334,9 @@ void add_replay_command(CLI::App& app) {
                                ". To write the composited clip to a file instead, run: artrace export " + opt->recording +
                                " --scene " + opt->ar.scene + " -o clip.mp4");
     }
+    std::vector<Output> outputs = SoakLog::outputs(opt->soak);
+    outputs.insert(outputs.end(), {{opt->json}, {opt->screenshot}});
+    check_outputs(outputs, ar_inputs(opt->recording, opt->ar));
     Replay(*opt).run();
   });
 }

@@ -3,6 +3,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "outputs.h"
+
 #include "artrace/core/renderer.h"
 
 #include <cstdlib>

@@ -3,6 +3,8 @@
 // drifted. bench-ar and replay take --soak PREFIX; scripts/soak.sh runs one and judges it.
 #pragma once
 
+#include "outputs.h"
+
 #include <nlohmann/json.hpp>
 
 #include <string>
@@ -20,6 +22,11 @@ class SoakLog {
   SoakLog(std::string prefix, int every, std::string unit = "frame") : prefix_(std::move(prefix)), every_(every), unit_(std::move(unit)) {}
 
   bool on() const { return !prefix_.empty(); }
+  /// The files a soak with this prefix writes (none without one), for check_outputs.
+  static std::vector<Output> outputs(const std::string& prefix) {
+    if (prefix.empty()) return {};
+    return {{prefix + ".csv"}, {prefix + "_memory.png"}, {prefix + "_frame_time.png"}};
+  }
   /// Records the time of one more frame; every `every` frames, a sample: the frame count, resident
   /// memory and the median time of those frames.
   void add(double frame_ms);
