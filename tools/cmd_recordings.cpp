@@ -14,6 +14,7 @@
 #include "outputs.h"
 #include "recording_options.h"
 #include "shards.h"
+#include "stop_signals.h"
 
 #include "artrace/ar/plane_fit.h"
 #include "artrace/io/tum_reader.h"
@@ -290,9 +291,9 @@ void add_recording_commands(CLI::App& app) {
       if (opt->kinect) opt->synth.depth_model = ar::DepthModel{};
       const io::AffScene scene = io::load_aff(opt->scene);
       io::Synthesizer synth(scene, opt->synth);
-      auto writer = io::make_recording_writer(opt->output, opt->synth.fps);
+      StoppableRecordingWriter writer(io::make_recording_writer(opt->output, opt->synth.fps), opt->output);
       const auto t0 = std::chrono::steady_clock::now();
-      const int n = synth.write(*writer);
+      const int n = synth.write(writer);
       std::printf("%s: %d frames %dx%d (%s depth) in %.2f s\n", opt->output.c_str(), n, opt->synth.width,
                   opt->synth.height, opt->kinect ? "Kinect-like" : "exact", ms_since(t0) / 1000.0);
     });
@@ -309,14 +310,14 @@ void add_recording_commands(CLI::App& app) {
       note_recording_output(*dst);
       check_outputs(recording_outputs(*dst), recording_inputs(*src, rec->intrinsics, rec->trajectory));
       auto in = open_recording(*src, *rec);
-      auto out = io::make_recording_writer(*dst);
+      StoppableRecordingWriter out(io::make_recording_writer(*dst), *dst);
       ar::SensorFrame f;
       int n = 0;
       while (in->next(f)) {
-        out->write(f);
+        out.write(f);
         ++n;
       }
-      out->close();
+      out.close();
       std::printf("%s: %d frames from %s\n", dst->c_str(), n, in->describe().c_str());
     });
   }

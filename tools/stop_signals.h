@@ -1,15 +1,18 @@
 // Stopping a command that writes outputs: Ctrl-C's SIGINT, SIGTERM (kill's default, and what Slurm
 // sends a job at its time limit or when it is cancelled, before SIGKILL) and SIGHUP (the terminal
 // closed) are caught while a StopSignals lives. Export and join ask throw_if_stopped() after each
-// frame; its exception unwinds to the code that removes the partial output, so a stopped export or
-// join leaves nothing behind, under the final name or a partial one. Batch passes the signal on to
-// its jobs.
+// frame, and convert and synth before each frame they write (StoppableRecordingWriter); its
+// exception unwinds to the code that removes the partial output, so a stopped command leaves
+// nothing behind, under the final name or a partial one. Batch passes the signal on to its jobs.
 #pragma once
 
 #include <signal.h>
 
+#include "artrace/io/recording_writer.h"
+
 #include <csignal>
 #include <filesystem>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -50,6 +53,29 @@ class StopSignals {
  private:
   static constexpr int kSignals[3] = {SIGINT, SIGTERM, SIGHUP};
   struct sigaction previous_[3];
+};
+
+/// A recording writer that stops, before writing the next frame, once a stop signal has come: the
+/// exception unwinds through the writer it wraps, whose destructor removes its partial output.
+/// The signals are caught from construction to close().
+class StoppableRecordingWriter : public io::RecordingWriter {
+ public:
+  StoppableRecordingWriter(std::unique_ptr<io::RecordingWriter> inner, std::filesystem::path out)
+      : inner_(std::move(inner)), out_(std::move(out)), stop_(std::make_unique<StopSignals>()) {}
+  void write(const ar::SensorFrame& frame) override {
+    StopSignals::throw_if_stopped(out_);
+    inner_->write(frame);
+  }
+  void close() override {
+    StopSignals::throw_if_stopped(out_);
+    inner_->close();
+    stop_.reset();
+  }
+
+ private:
+  std::unique_ptr<io::RecordingWriter> inner_;
+  std::filesystem::path out_;
+  std::unique_ptr<StopSignals> stop_;
 };
 
 }  // namespace artrace::tools

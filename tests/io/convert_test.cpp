@@ -45,3 +45,41 @@ TEST(Convert, RealOniToTumAndBackKeepsEveryFrame) {
 
 }  // namespace
 }  // namespace artrace::io
+
+namespace artrace::io {
+namespace {
+
+/// A conversion or a synthetic recording stopped by a signal (Ctrl-C's SIGINT, kill's and Slurm's
+/// SIGTERM, a closed terminal's SIGHUP) says so and leaves nothing behind: neither the output nor
+/// its partial folder or file.
+TEST(Convert, StoppedConversionOrSynthesisLeavesNoFile) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_convert_stop");
+  std::filesystem::remove_all(dir);
+  const auto big = dir / "big";
+  synth_room(big, 120, 320, 240);
+  const auto log = dir / "log.txt";
+  const std::string aff = (kRoot / "data/scenes/room.aff").string();
+  const std::tuple<const char*, const char*, std::string> runs[] = {
+      {"TERM", "tum", "convert " + big.string()},
+      {"INT", "converted", "convert " + big.string()},
+      {"HUP", "synth_tum", "synth --scene " + aff + " --frames 100000 --width 64 --height 48 --threads 1"},
+      {"TERM", "synth.oni", "synth --scene " + aff + " --frames 100000 --width 64 --height 48 --threads 1"},
+  };
+  for (const auto& [signal, name, args] : runs) {
+    const auto out = dir / name;
+    const int st = run("timeout --preserve-status -s " + std::string(signal) + " 0.4 " + std::string(ARTRACE_BINARY) + " " + args +
+                       " -o " + out.string() + " > " + log.string() + " 2>&1");
+    EXPECT_EQ(st, 1) << signal << " " << name << ": " << ::artrace::test::read_file(log);
+    EXPECT_NE(::artrace::test::read_file(log).find("stopped by SIG" + std::string(signal) + ": " + out.string() + " was not written"),
+              std::string::npos)
+        << ::artrace::test::read_file(log);
+    for (const auto& e : std::filesystem::directory_iterator(dir)) {
+      EXPECT_EQ(e.path().filename().string().rfind(name, 0), std::string::npos) << signal << ": " << e.path() << " left behind";
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace artrace::io
