@@ -103,6 +103,11 @@ bool ImageFolderReader::next(ar::SensorFrame& f) {
   const cv::Mat raw = read_image_file(depth_name, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
   if (raw.empty()) throw ParseError(depth_name, 0, 0, "cannot decode the depth image");
   if (raw.type() != CV_16UC1) throw ParseError(depth_name, 0, 0, "depth PNG must be 16-bit with one channel");
+  if (raw.cols != bgr.cols || raw.rows != bgr.rows) {
+    throw ParseError(depth_name, 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) + ", colour " +
+                                           std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
+  }
+  if (intrinsics_) check_intrinsics_size(*intrinsics_, bgr.cols, bgr.rows, intrinsics_source_, intrinsics_source_ == "given" ? "the intrinsics given are" : "is");
   f = ar::SensorFrame{};
   f.index = cursor_;
   f.color_time_s = f.depth_time_s = static_cast<double>(cursor_) / options_.fps;

@@ -25,10 +25,7 @@ class CameraFileSource : public ar::FrameSource {
   bool next(ar::SensorFrame& f) override {
     if (!inner_->next(f)) return false;
     const ar::PinholeIntrinsics& k = camera_.intrinsics;
-    if ((k.width && k.width != f.color.width) || (k.height && k.height != f.color.height)) {
-      throw ParseError(camera_.file.string(), 0, 0, "is for " + std::to_string(k.width) + "x" + std::to_string(k.height) + " images, the recording's are " +
-                                                        std::to_string(f.color.width) + "x" + std::to_string(f.color.height));
-    }
+    check_intrinsics_size(k, f.color.width, f.color.height, camera_.file.string());
     for (ar::PinholeIntrinsics* out : {&f.color_intrinsics, &f.depth_intrinsics}) {
       *out = k;
       out->width = f.color.width;

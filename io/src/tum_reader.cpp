@@ -179,6 +179,12 @@ ar::PinholeIntrinsics freiburg_intrinsics(const std::string& name) {
   return {640, 480, 525.0, 525.0, 319.5, 239.5};
 }
 
+void check_intrinsics_size(const ar::PinholeIntrinsics& k, int width, int height, const std::string& where, const std::string& subject) {
+  if ((k.width == 0 || k.width == width) && (k.height == 0 || k.height == height)) return;  // 0: not named
+  throw ParseError(where, 0, 0, subject + " for " + std::to_string(k.width) + "x" + std::to_string(k.height) + " images, the recording's are " +
+                                     std::to_string(width) + "x" + std::to_string(height));
+}
+
 TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& options)
     : folder_(folder), options_(options) {
   if (!std::filesystem::is_directory(folder)) throw ParseError(folder.string(), 0, 0, "not a folder");
@@ -213,9 +219,11 @@ TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& opti
   if (options.intrinsics) {
     intrinsics_ = *options.intrinsics;
     intrinsics_source_ = "given";
+    intrinsics_where_ = folder;
+    intrinsics_subject_ = "the intrinsics given are";
   } else if (std::filesystem::exists(folder / "intrinsics.txt")) {
     intrinsics_ = read_intrinsics(folder / "intrinsics.txt");
-    intrinsics_source_ = (folder / "intrinsics.txt").string();
+    intrinsics_source_ = intrinsics_where_ = folder / "intrinsics.txt";
   } else {
     const std::string name = std::filesystem::absolute(folder).lexically_normal().string();
     intrinsics_ = freiburg_intrinsics(name);
@@ -225,12 +233,13 @@ TumReader::TumReader(const std::filesystem::path& folder, const TumOptions& opti
                                                                                                         : 0;
     if (fr > 0) {
       intrinsics_source_ = "the TUM benchmark's Freiburg " + std::to_string(fr) + " intrinsics, chosen by the folder's name";
+      intrinsics_where_ = folder;
+      intrinsics_subject_ = intrinsics_source_ + ", are";
     } else {
-      std::ostringstream m;
-      m << folder.string() << ": no intrinsics.txt and no Freiburg sequence name: default intrinsics fx " << intrinsics_.fx << ", fy "
-        << intrinsics_.fy << ", cx " << intrinsics_.cx << ", cy " << intrinsics_.cy << " (give the camera's own with --intrinsics)";
-      warnings_.push_back(m.str());
+      warnings_.push_back(folder.string() + ": no intrinsics.txt and no Freiburg sequence name: default intrinsics fx = fy = 525 px at "
+                          "640 wide (scaled with the width), principal point at the centre (give the camera's own with --intrinsics)");
       intrinsics_source_ = "defaults";
+      default_intrinsics_ = true;
     }
   }
 }
@@ -258,9 +267,15 @@ ar::SensorFrame TumReader::read(int64_t i) const {
   }
   f.color = color_from_bgr(bgr);
   f.depth = depth_from_u16(raw, options_.depth_scale);
-  f.color_intrinsics = intrinsics_;
-  f.color_intrinsics.width = bgr.cols;
-  f.color_intrinsics.height = bgr.rows;
+  if (default_intrinsics_) {
+    const double focal = 525.0 * bgr.cols / 640.0;
+    f.color_intrinsics = {bgr.cols, bgr.rows, focal, focal, 0.5 * bgr.cols - 0.5, 0.5 * bgr.rows - 0.5};
+  } else {
+    check_intrinsics_size(intrinsics_, bgr.cols, bgr.rows, intrinsics_where_.string(), intrinsics_subject_);
+    f.color_intrinsics = intrinsics_;
+    f.color_intrinsics.width = bgr.cols;
+    f.color_intrinsics.height = bgr.rows;
+  }
   f.depth_intrinsics = f.color_intrinsics;  // TUM depth is registered to colour
   if (!trajectory_.empty()) {
     if (auto pose = trajectory_.at(e.color.time_s, options_.max_pose_gap_s)) f.world_from_camera = *pose;

@@ -62,6 +62,34 @@ TEST(ImageFolder, ImagePairsInOrderWithDepthInMetres) {
   std::filesystem::remove_all(dir);
 }
 
+/// Depth images of another size than the colour images (an unregistered sensor's, or a folder put
+/// together from two recordings) are refused, naming the depth image and both sizes: the
+/// compositor reads a colour pixel's depth at the same pixel. So is an intrinsics.txt naming
+/// another size than the images'.
+TEST(ImageFolder, ImagesAndIntrinsicsOfAnotherSizeAreRefused) {
+  const auto dir = make_folder("artrace_imgfolder_sizes", false, 2);
+  auto refusal = [&]() -> std::string {
+    try {
+      auto src = open_recording(dir);
+      ar::SensorFrame f;
+      while (src->next(f)) {
+      }
+    } catch (const ParseError& e) {
+      return e.what();
+    }
+    return "read";
+  };
+  std::ofstream(dir / "intrinsics.txt") << "30 31 15.5 11.5 32 24\n";
+  EXPECT_EQ(refusal(), "read");
+  std::ofstream(dir / "intrinsics.txt") << "30 31 15.5 11.5 64 48\n";
+  EXPECT_NE(refusal().find((dir / "intrinsics.txt").string() + ": is for 64x48 images, the recording's are 32x24"), std::string::npos)
+      << refusal();
+  std::filesystem::remove(dir / "intrinsics.txt");
+  cv::imwrite((dir / "depth" / "001.png").string(), cv::Mat(12, 16, CV_16UC1, cv::Scalar(1000)));
+  EXPECT_NE(refusal().find((dir / "depth" / "001.png").string() + ": depth is 16x12, colour 32x24"), std::string::npos) << refusal();
+  std::filesystem::remove_all(dir);
+}
+
 TEST(ImageFolder, ColourVideoWithDepthImagesSeeksFrameAccurately) {
   const auto dir = make_folder("artrace_vidfolder", true, 6);
   auto src = open_recording(dir);

@@ -101,7 +101,7 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
     ASSERT_TRUE(f.world_from_camera.has_value());
     // linear between (99.95, x=0) and (100.25, x=3): x = 10 (t - 99.95)
     EXPECT_NEAR(f.world_from_camera->translation().x(), 10.0 * (100.0 + 0.1 * k - 99.95), 1e-6);
-    EXPECT_EQ(f.color_intrinsics.fx, 525.0) << "no name, no intrinsics.txt: the ROS default";
+    EXPECT_EQ(f.color_intrinsics.fx, 525.0 * 5 / 640) << "no name, no intrinsics.txt: the ROS default, scaled with the width";
   }
   EXPECT_FALSE(reader.next(f));
   reader.seek(1);
@@ -124,6 +124,73 @@ TEST(Tum, ReaderDeliversFramesInMetresWithPoses) {
         << msg;
   }
   std::filesystem::remove_all(dir);
+}
+
+/// A TUM folder of `w` x `h` images (one frame), with `intrinsics` as its intrinsics.txt ("" for none).
+std::filesystem::path tum_folder(const std::filesystem::path& dir, int w, int h, const std::string& intrinsics) {
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "rgb");
+  std::filesystem::create_directories(dir / "depth");
+  std::ofstream(dir / "rgb.txt") << "1.0 rgb/0.png\n";
+  std::ofstream(dir / "depth.txt") << "1.0 depth/0.png\n";
+  cv::imwrite((dir / "rgb" / "0.png").string(), cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 20, 30)));
+  cv::imwrite((dir / "depth" / "0.png").string(), cv::Mat(h, w, CV_16UC1, cv::Scalar(5000)));
+  if (!intrinsics.empty()) std::ofstream(dir / "intrinsics.txt") << intrinsics;
+  return dir;
+}
+
+/// Intrinsics that name the size of the images they are for, and a recording whose images are of
+/// another size (a sequence downscaled after calibration): the frames are refused with the file
+/// and both sizes named, as a camera file given with --intrinsics is, instead of being projected
+/// with a focal length and principal point for other images. The Freiburg intrinsics chosen by a
+/// folder's name are for the benchmark's 640x480 images, and are refused on others the same way.
+/// Without any, the default (525 px at 640 wide) is scaled with the width and centred, as an image
+/// folder's is, with a warning.
+TEST(Tum, IntrinsicsForImagesOfAnotherSizeAreRefused) {
+  const auto root = ::artrace::test::scratch_path("artrace_tum_intrinsics_size");
+  auto first_frame = [](const std::filesystem::path& dir) {
+    ar::SensorFrame f;
+    auto src = open_recording(dir);
+    EXPECT_TRUE(src->next(f));
+    return f;
+  };
+  auto refusal = [&](const std::filesystem::path& dir) -> std::string {
+    try {
+      first_frame(dir);
+    } catch (const ParseError& e) {
+      return e.what();
+    }
+    return "read";
+  };
+  const auto a = tum_folder(root / "a", 320, 240, "289.7 289.7 159.5 119.5 640 480\n");
+  EXPECT_NE(refusal(a).find((a / "intrinsics.txt").string() + ": is for 640x480 images, the recording's are 320x240"),
+            std::string::npos)
+      << refusal(a);
+  tum_folder(a, 320, 240, "289.7 289.7 159.5 119.5 320 240\n");
+  EXPECT_DOUBLE_EQ(first_frame(a).color_intrinsics.fx, 289.7);
+  tum_folder(a, 320, 240, "289.7 289.7 159.5 119.5\n");
+  EXPECT_DOUBLE_EQ(first_frame(a).color_intrinsics.cx, 159.5) << "no size named: taken as the images'";
+
+  const auto fr1 = tum_folder(root / "rgbd_dataset_freiburg1_small", 320, 240, "");
+  const std::string msg = refusal(fr1);
+  EXPECT_NE(msg.find(fr1.string() + ": the TUM benchmark's Freiburg 1 intrinsics, chosen by the folder's name, are for 640x480 images, "
+                                    "the recording's are 320x240"),
+            std::string::npos)
+      << msg;
+  tum_folder(fr1, 640, 480, "");
+  EXPECT_DOUBLE_EQ(first_frame(fr1).color_intrinsics.fx, 517.3);
+
+  const auto plain = tum_folder(root / "plain", 320, 240, "");
+  const ar::SensorFrame f = first_frame(plain);
+  EXPECT_DOUBLE_EQ(f.color_intrinsics.fx, 525.0 * 320 / 640);
+  EXPECT_DOUBLE_EQ(f.color_intrinsics.fy, 525.0 * 320 / 640);
+  EXPECT_DOUBLE_EQ(f.color_intrinsics.cx, 159.5);
+  EXPECT_DOUBLE_EQ(f.color_intrinsics.cy, 119.5);
+  const auto warnings = open_recording(plain)->warnings();
+  EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const std::string& w) {
+    return w.find("default intrinsics fx = fy = 525 px at 640 wide (scaled with the width), principal point at the centre") != std::string::npos;
+  }));
+  std::filesystem::remove_all(root);
 }
 
 /// intrinsics.txt (TUM and image folders): the first line that is not a comment, checked. Values

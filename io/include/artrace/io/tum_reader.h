@@ -39,6 +39,11 @@ ar::Trajectory read_tum_trajectory(const std::filesystem::path& path);
 /// size (when given) 1 to 100000 pixels; io::ParseError naming the file and line otherwise. The
 /// size stays 0 when not given (the readers take it from the images).
 ar::PinholeIntrinsics read_intrinsics(const std::filesystem::path& path);
+/// Throws ParseError "WHERE: SUBJECT for WxH images, the recording's are wxh" when `k` names an
+/// image size (a width or height not 0) other than the images' `width` x `height`: intrinsics are
+/// not scaled to other images on a guess.
+void check_intrinsics_size(const ar::PinholeIntrinsics& k, int width, int height, const std::string& where,
+                           const std::string& subject = "is");
 /// Writes one (write-then-rename).
 void write_tum_trajectory(const std::filesystem::path& path, const ar::Trajectory& trajectory);
 
@@ -49,7 +54,8 @@ std::vector<std::pair<size_t, size_t>> associate(const std::vector<TimedFile>& c
                                                  const std::vector<TimedFile>& depth, double max_dt_s);
 
 /// Intrinsics of the Freiburg sequences by name ("freiburg1"/"fr1", 2, 3), else the ROS default
-/// (525, 525, 319.5, 239.5), for 640x480.
+/// (525, 525, 319.5, 239.5), for 640x480. The reader refuses the Freiburg ones on images of another
+/// size, and scales the default with the width.
 ar::PinholeIntrinsics freiburg_intrinsics(const std::string& sequence_name);
 
 struct TumOptions {
@@ -86,6 +92,9 @@ class TumReader : public ar::FrameSource {
   TumOptions options_;
   ar::PinholeIntrinsics intrinsics_;
   std::string intrinsics_source_;
+  std::string intrinsics_subject_ = "is";  ///< for check_intrinsics_size
+  std::filesystem::path intrinsics_where_;
+  bool default_intrinsics_ = false;  ///< the ROS default, scaled with each frame's width
   std::vector<std::string> warnings_;
   ar::Trajectory trajectory_;
   std::vector<Entry> frames_;
