@@ -79,8 +79,10 @@ class ArSession {
   /// outside the trajectory, or in a gap of it) has no camera to place the models with: it comes
   /// back as recorded, and the first such frame is warned about on stderr. A recording without any
   /// trajectory (a TUM or image folder without one) is composited with a fixed camera at the
-  /// world's origin, as an .oni file's is, with a warning the first time.
+  /// world's origin, as an .oni file's is, with a warning the first time. A frame whose depth is
+  /// not of its colour's size is refused (the compositor reads a pixel's depth at that pixel).
   ar::ColorImage composite(const ar::SensorFrame& f, ar::CompositeStats* st, double* update_ms = nullptr) {
+    ar::require_depth_at_colour_size(f, recording_, "occlusion needs a depth at every colour pixel");
     if (!f.world_from_camera) {
       if (const auto span = source_->trajectory_span()) {
         ++frames_without_pose_;

@@ -31,9 +31,7 @@ ar::RoomMesh fuse_recording(ar::FrameSource& recording, const FusionOptions& o, 
       ++st.without_pose;
       continue;
     }
-    if (f.depth.width != f.color.width || f.depth.height != f.color.height) {
-      throw std::runtime_error(recording.describe() + ": frame " + std::to_string(k) + ": depth and colour differ in size (fusion needs registered depth)");
-    }
+    ar::require_depth_at_colour_size(f, recording.describe(), "fusion needs depth registered to the colour");
     colour.Prepare(f.color.width, f.color.height, 3, 1);
     std::memcpy(colour.data_.data(), f.color.rgb.data(), f.color.rgb.size());
     depth.Prepare(f.depth.width, f.depth.height, 1, 4);

@@ -59,11 +59,14 @@ OdometryResult estimate_trajectory(ar::FrameSource& source, const OdometryOption
     s.rotation = Eigen::Quaterniond(f.world_from_camera->rotation()).normalized();
     given.push_back(s);
   };
+  const std::string need = "odometry needs depth registered to the colour";
+  ar::require_depth_at_colour_size(frame, source.describe(), need);
   push(frame.color_time_s);
   remember(frame);
   Prepared prev = prepare(frame);
   int n = 1;
   while ((options.max_frames <= 0 || n < options.max_frames) && source.next(frame)) {
+    ar::require_depth_at_colour_size(frame, source.describe(), need);
     Prepared cur = prepare(frame);
     cv::Mat rt;
     // Rt maps points of the source (previous) frame into the destination (current) frame.

@@ -49,6 +49,7 @@ class TumWriter : public RecordingWriter {
     }
   }
   void write(const ar::SensorFrame& f) override {
+    ar::require_depth_at_colour_size(f, dir_.string(), "a TUM folder's depth is registered to its colour (convert to .oni instead)");
     char name[64];
     std::snprintf(name, sizeof(name), "%.6f.png", f.color_time_s);
     const cv::Mat rgb(f.color.height, f.color.width, CV_8UC3, const_cast<uint8_t*>(f.color.rgb.data()));

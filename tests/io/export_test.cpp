@@ -2,6 +2,8 @@
 // when an export stops early.
 #include "../cli_util.h"
 #include "../test_util.h"
+#include "artrace/io/oni_writer.h"
+#include "artrace/io/recording.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
@@ -228,6 +230,50 @@ TEST(Export, RecordingWithoutATrajectoryIsCompositedWithAFixedCameraAndAWarning)
   EXPECT_FALSE(std::filesystem::exists(dir / "refused"));
   std::filesystem::remove_all(dir);
 }
+
+/// A recording whose depth frames are of another size than its colour frames (an .oni recorded
+/// with QVGA depth and VGA colour) is refused by the AR commands, naming it and both sizes: the
+/// compositor reads each colour pixel's depth at the same pixel, and without it drew the models
+/// over everything, with no shadows on the real surfaces, and said nothing.
+TEST(Export, DepthOfAnotherSizeThanTheColourIsRefused) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_depth_size");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto rec = dir / "qvga_depth.oni";
+  {
+    OniWriter w(rec, {32, 24, 30}, {64, 48, 30});
+    const std::vector<uint16_t> depth(32 * 24, 1500);
+    const std::vector<uint8_t> rgb(64 * 48 * 3, 128);
+    for (int k = 0; k < 3; ++k) w.write(depth.data(), rgb.data(), 33333u * static_cast<uint64_t>(k));
+    w.close();
+  }
+  const auto scene = box_ahead_of_origin(dir);
+  const auto log = dir / "log.txt";
+  for (const std::string cmd : {"export", "bench-ar"}) {
+    const std::string out = cmd == "export" ? " -o " + (dir / "clip.mp4").string() : " --frames 2";
+    EXPECT_EQ(run(std::string(ARTRACE_BINARY) + " " + cmd + " " + rec.string() + " --scene " + scene.string() + out + " > " + log.string() + " 2>&1"), 1);
+    EXPECT_NE(::artrace::test::read_file(log).find(rec.string() + ": frame 0: depth is 32x24, colour 64x48"), std::string::npos)
+        << ::artrace::test::read_file(log);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "clip.mp4"));
+  // and by the other commands that need the depth at the colour's pixels, naming the frame
+  const std::pair<std::string, std::string> others[] = {
+      {"track " + rec.string() + " -o " + (dir / "poses.txt").string(), "frame 0: depth is 32x24, colour 64x48: odometry needs"},
+      {"fuse " + rec.string() + " -q -o " + (dir / "room.ply").string(), "frame 0: depth is 32x24, colour 64x48: fusion needs"},
+      {"convert " + rec.string() + " -o " + (dir / "tum").string(), (dir / "tum").string() + ": frame 0: depth is 32x24, colour 64x48"},
+  };
+  for (const auto& [args, message] : others) {
+    EXPECT_EQ(run(std::string(ARTRACE_BINARY) + " " + args + " > " + log.string() + " 2>&1"), 1) << args;
+    EXPECT_NE(::artrace::test::read_file(log).find(message), std::string::npos) << ::artrace::test::read_file(log);
+  }
+  for (const char* name : {"poses.txt", "room.ply", "tum", "tum.partial"}) EXPECT_FALSE(std::filesystem::exists(dir / name)) << name;
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " convert " + rec.string() + " -o " + (dir / "copy.oni").string() + " > " + log.string() + " 2>&1"), 0)
+      << "an .oni keeps each stream's own size";
+  std::filesystem::remove_all(dir);
+}
+
+bool is_video(const std::string& name) { return name.find('.') != std::string::npos; }
 
 TEST(Export, StoppedExportLeavesNoFile) {
   ARTRACE_REQUIRE_BINARY();

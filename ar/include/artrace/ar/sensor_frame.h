@@ -53,6 +53,16 @@ struct SensorFrame {
   int64_t index = 0;
 };
 
+/// Throws std::runtime_error "WHERE: frame N: depth is WxH, colour wxh: NEED" unless the frame's
+/// depth is of its colour's size, as everything that reads a colour pixel's depth at the same
+/// pixel (the compositor, odometry, fusion, a TUM folder) needs.
+inline void require_depth_at_colour_size(const SensorFrame& f, const std::string& where, const std::string& need) {
+  if (f.depth.width == f.color.width && f.depth.height == f.color.height) return;
+  throw std::runtime_error(where + ": frame " + std::to_string(f.index) + ": depth is " + std::to_string(f.depth.width) + "x" +
+                           std::to_string(f.depth.height) + ", colour " + std::to_string(f.color.width) + "x" +
+                           std::to_string(f.color.height) + ": " + need);
+}
+
 /// Every reader: open in the constructor (throwing io::ParseError naming the file on bad input),
 /// then next / seek / rewind.
 class FrameSource {
