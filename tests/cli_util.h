@@ -26,6 +26,15 @@ inline int run(const std::string& cmd) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
 }
 
+/// Runs `command` (its output into `log`) in the background and sends it SIG`signal` ("TERM",
+/// "INT", "HUP") once the shell test `ready` holds (looked at every 10 ms, for at most 30 s): the
+/// signal comes while the command is at work, however long it takes to start on a loaded machine.
+/// Returns the command's exit status (128 + the signal's number when the signal ended it).
+inline int run_until(const std::string& command, const std::string& ready, const std::string& signal, const std::filesystem::path& log) {
+  return run("bash -c '" + command + " > " + log.string() + " 2>&1 & p=$!; for i in $(seq 3000); do " + ready +
+             " && break; sleep 0.01; done; kill -" + signal + " $p; wait $p'");
+}
+
 /// A synthetic recording of the demo room.
 inline void synth_room(const std::filesystem::path& out, int frames, int width, int height) {
   const AffScene room = load_aff(kRoot / "data/scenes/room.aff");

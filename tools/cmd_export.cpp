@@ -53,7 +53,8 @@ void run(const Options& opt) {
 
   const std::filesystem::path out(opt.output);
   const bool video = is_video_path(out);
-  const std::filesystem::path partial = prepare_partial(out);
+  const io::PartialOutput claim = prepare_partial(out);  // held until the output is in place
+  const std::filesystem::path& partial = claim.path();
   std::unique_ptr<ClipWriter> writer;
   auto cleanup = [&] {
     writer.reset();

@@ -57,7 +57,8 @@ void run_join(const JoinOptions& opt) {
 
   const std::filesystem::path out(opt.output);
   const bool video = is_video_path(out);
-  const std::filesystem::path partial = prepare_partial(out);
+  const io::PartialOutput claim = prepare_partial(out);  // held until the output is in place
+  const std::filesystem::path& partial = claim.path();
   std::unique_ptr<ClipWriter> writer;
   const double fps = opt.fps > 0.0 ? opt.fps : a.fps;
   ClipOptions clip = opt.clip;

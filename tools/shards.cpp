@@ -151,14 +151,11 @@ void note_recording_output(const std::filesystem::path& out) {
   std::fprintf(stderr, "note: %s does not end in .oni: it becomes a folder in the TUM RGB-D layout\n", out.string().c_str());
 }
 
-std::filesystem::path prepare_partial(const std::filesystem::path& out) {
+io::PartialOutput prepare_partial(const std::filesystem::path& out) {
   const bool video = is_video_path(out);
   const std::filesystem::path partial = video ? out.parent_path() / (out.stem().string() + ".partial" + out.extension().string())
                                               : std::filesystem::path(out.string() + ".partial");
-  if (!out.parent_path().empty()) std::filesystem::create_directories(out.parent_path());
-  std::filesystem::remove_all(partial);
-  if (!video) std::filesystem::create_directories(partial);
-  return partial;
+  return io::PartialOutput(partial, video ? io::PartialOutput::Kind::file : io::PartialOutput::Kind::folder, out.string());
 }
 
 }  // namespace artrace::tools

@@ -4,6 +4,8 @@
 // their output names, which choose what is written.
 #pragma once
 
+#include "artrace/io/atomic_file.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
@@ -63,8 +65,9 @@ void require_output_extension(const std::filesystem::path& out, const std::strin
 /// extension gets a note on stderr saying that it becomes a folder.
 void note_recording_output(const std::filesystem::path& out);
 /// Where an output is written before it is complete: "clip.partial.mp4" beside a clip (the
-/// extension kept, so that the encoder is chosen by it), "folder.partial" for a folder of PNGs.
-/// Leaves it empty (a folder made, a clip file removed) and makes the output's parent folder.
-std::filesystem::path prepare_partial(const std::filesystem::path& out);
+/// extension kept, so that the encoder is chosen by it), "folder.partial" for a folder of PNGs;
+/// claimed for this process (io::PartialOutput: new and empty, and refused while another process
+/// writes the same output). Makes the output's parent folder.
+io::PartialOutput prepare_partial(const std::filesystem::path& out);
 
 }  // namespace artrace::tools

@@ -2,6 +2,10 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -29,6 +33,22 @@ int write_checked(const std::filesystem::path& file, std::string_view bytes) {
   return err;
 }
 
+/// Gives `made` the name `path` unless something has it: 0, or the errno (EEXIST when taken).
+int take_name(const std::string& made, const std::filesystem::path& path, PartialOutput::Kind kind) {
+  if (renameat2(AT_FDCWD, made.c_str(), AT_FDCWD, path.c_str(), RENAME_NOREPLACE) == 0) return 0;
+  if (errno != EINVAL && errno != ENOSYS) return errno;
+  // a filesystem without RENAME_NOREPLACE: a file's link is refused when the name is taken; a
+  // folder's name is looked at first
+  if (kind == PartialOutput::Kind::file) {
+    if (::link(made.c_str(), path.c_str()) != 0) return errno;
+    ::unlink(made.c_str());
+    return 0;
+  }
+  std::error_code ec;
+  if (std::filesystem::exists(std::filesystem::symlink_status(path, ec))) return EEXIST;
+  return ::rename(made.c_str(), path.c_str()) == 0 ? 0 : errno;
+}
+
 [[noreturn]] void cannot_write(const std::filesystem::path& path, int err) {
   throw std::runtime_error(path.string() + ": cannot write: " + std::strerror(err));
 }
@@ -50,6 +70,59 @@ void write_file_atomically(const std::filesystem::path& path, std::string_view b
     throw std::runtime_error(path.string() + ": cannot write: " + ec.message());
   }
 }
+
+PartialOutput::PartialOutput(std::filesystem::path partial, Kind kind, std::string out) : path_(std::move(partial)) {
+  if (path_.has_parent_path()) std::filesystem::create_directories(path_.parent_path());
+  auto fail = [&](const std::string& what, int err) {
+    throw std::runtime_error(out + ": cannot create " + path_.string() + ": " + what + std::strerror(err));
+  };
+  for (int attempt = 0;; ++attempt) {
+    // a new one under a unique name, locked before it takes the partial's name
+    std::string made = path_.string() + ".XXXXXX";
+    int fd = -1;
+    if (kind == Kind::folder) {
+      if (!mkdtemp(made.data())) fail("", errno);
+      fd = ::open(made.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    } else {
+      fd = mkostemp(made.data(), O_CLOEXEC);
+    }
+    if (fd < 0 || flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      std::error_code ec;
+      std::filesystem::remove(made, ec);
+      if (fd >= 0) ::close(fd);
+      fail("", err);
+    }
+    const int err = take_name(made, path_, kind);
+    if (err == 0) {
+      fd_ = fd;
+      return;
+    }
+    std::error_code ec;
+    std::filesystem::remove(made, ec);
+    ::close(fd);
+    if (err != EEXIST || attempt > 0) fail("", err);
+    // a partial is there already: another process's, in use, or one left by a process that died
+    const int held = ::open(path_.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    if (held >= 0 && flock(held, LOCK_EX | LOCK_NB) != 0) {
+      const int busy = errno;
+      ::close(held);
+      if (busy == EWOULDBLOCK) {
+        throw std::runtime_error(out + ": is being written by another process (" + path_.string() + " is in use)");
+      }
+      fail("", busy);
+    }
+    std::filesystem::remove_all(path_, ec);
+    if (held >= 0) ::close(held);
+    if (ec) fail("the one left there cannot be removed: ", ec.value());
+  }
+}
+
+PartialOutput::~PartialOutput() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+PartialOutput::PartialOutput(PartialOutput&& other) noexcept : path_(std::move(other.path_)), fd_(other.fd_) { other.fd_ = -1; }
 
 void write_png(const std::filesystem::path& path, const cv::Mat& image, bool atomically) {
   std::vector<uchar> bytes;

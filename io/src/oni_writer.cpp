@@ -1,6 +1,7 @@
 #include "artrace/io/oni_writer.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <tuple>
 #include <stdexcept>
@@ -34,9 +35,9 @@ OniWriter::OniWriter(const std::filesystem::path& path, const OniStreamFormat& d
   if (static_cast<size_t>(color.width) * color.height * 3 > 5760000u) {
     throw std::invalid_argument(path.string() + ": OpenNI2's player takes frames of at most 5,760,000 bytes");
   }
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path());
+  claim_ = std::make_unique<PartialOutput>(partial_, PartialOutput::Kind::file, path.string());
   file_ = std::fopen(partial_.string().c_str(), "wb");
-  if (!file_) throw std::runtime_error(partial_.string() + ": cannot create");
+  if (!file_) throw std::runtime_error(partial_.string() + ": cannot create: " + std::strerror(errno));
   depth_.frame_bytes = static_cast<size_t>(depth.width) * depth.height * 2;
   color_.frame_bytes = static_cast<size_t>(color.width) * color.height * 3;
   // File header: magic, version 1.0.1.0, max timestamp (patched at close), max node id.

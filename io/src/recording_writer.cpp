@@ -34,8 +34,8 @@ void add_pose(std::vector<ar::PoseSample>& poses, const ar::SensorFrame& f) {
 
 class TumWriter : public RecordingWriter {
  public:
-  explicit TumWriter(const std::filesystem::path& dir) : dir_(dir), tmp_(dir.string() + ".partial") {
-    std::filesystem::remove_all(tmp_);
+  explicit TumWriter(const std::filesystem::path& dir)
+      : dir_(dir), claim_(dir.string() + ".partial", PartialOutput::Kind::folder, dir.string()), tmp_(claim_.path()) {
     std::filesystem::create_directories(tmp_ / "rgb");
     std::filesystem::create_directories(tmp_ / "depth");
     rgb_ << "# color images\n# timestamp filename\n" << std::fixed << std::setprecision(6);
@@ -80,7 +80,9 @@ class TumWriter : public RecordingWriter {
   }
 
  private:
-  std::filesystem::path dir_, tmp_;
+  std::filesystem::path dir_;
+  PartialOutput claim_;  ///< the partial folder, held while it is written
+  std::filesystem::path tmp_;
   std::ostringstream rgb_, depth_;  ///< rgb.txt and depth.txt, written at close
   std::vector<ar::PoseSample> poses_;
   ar::PinholeIntrinsics intrinsics_;

@@ -11,6 +11,7 @@
 #include "../cli_util.h"
 #include "../test_util.h"
 
+#include <fstream>
 #include <stdexcept>
 
 namespace artrace::io {
@@ -107,6 +108,38 @@ TEST(AtomicFile, EveryWriterReportsAFullDisk) {
   EXPECT_TRUE(throws_with([&] { write_room_ply(mesh, ply); }, ply.string() + ": cannot write: No space left on device"));
   EXPECT_TRUE(nothing_at(ply));
   EXPECT_TRUE(nothing_at(trajectory));
+  std::filesystem::remove_all(dir);
+}
+
+/// A partial output is held by one writer at a time: a second claim of it, made while the first
+/// lives, is refused naming the output (flock locks belong to an open file, so a second claim in
+/// the same process meets the first as another process's would); once the first is gone, its
+/// partial (as a process that died leaves it, contents and all) is removed and claimed afresh,
+/// empty. Files and folders alike; nothing but the partial itself is left beside it.
+TEST(AtomicFile, PartialOutputIsHeldByOneWriterAtATime) {
+  const auto dir = ::artrace::test::scratch_path("artrace_partial_claims");
+  std::filesystem::remove_all(dir);
+  for (const auto kind : {PartialOutput::Kind::folder, PartialOutput::Kind::file}) {
+    const bool folder = kind == PartialOutput::Kind::folder;
+    const auto partial = dir / (folder ? "frames.partial" : "clip.partial.mp4");
+    {
+      PartialOutput first(partial, kind, "OUT");
+      EXPECT_EQ(first.path(), partial);
+      EXPECT_EQ(folder, std::filesystem::is_directory(partial));
+      if (folder) std::ofstream(partial / "frame_000000.png") << "written";
+      else std::ofstream(partial) << "written";
+      EXPECT_TRUE(throws_with([&] { PartialOutput second(partial, kind, "OUT"); },
+                              "OUT: is being written by another process (" + partial.string() + " is in use)"));
+      EXPECT_TRUE(folder ? std::filesystem::exists(partial / "frame_000000.png") : std::filesystem::file_size(partial) == 7)
+          << "the first writer's partial is left alone";
+    }
+    PartialOutput again(partial, kind, "OUT");
+    EXPECT_TRUE(folder ? std::filesystem::is_empty(partial) : std::filesystem::file_size(partial) == 0) << "claimed afresh";
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    EXPECT_EQ(names, std::vector<std::string>{partial.filename().string()});
+    std::filesystem::remove_all(partial);
+  }
   std::filesystem::remove_all(dir);
 }
 

@@ -68,8 +68,10 @@ TEST(Convert, StoppedConversionOrSynthesisLeavesNoFile) {
   };
   for (const auto& [signal, name, args] : runs) {
     const auto out = dir / name;
-    const int st = run("timeout --preserve-status -s " + std::string(signal) + " 0.4 " + std::string(ARTRACE_BINARY) + " " + args +
-                       " -o " + out.string() + " > " + log.string() + " 2>&1");
+    // once the first frame is written
+    const std::string partial = out.string() + ".partial";
+    const std::string ready = out.extension() == ".oni" ? "[ -s " + partial + " ]" : "ls " + partial + "/rgb/*.png > /dev/null 2>&1";
+    const int st = run_until(std::string(ARTRACE_BINARY) + " " + args + " -o " + out.string(), ready, signal, log);
     EXPECT_EQ(st, 1) << signal << " " << name << ": " << ::artrace::test::read_file(log);
     EXPECT_NE(::artrace::test::read_file(log).find("stopped by SIG" + std::string(signal) + ": " + out.string() + " was not written"),
               std::string::npos)

@@ -312,9 +312,12 @@ TEST(Export, StoppedExportLeavesNoFile) {
   const auto log = dir / "log.txt";
   for (const auto& [signal, name] : {std::pair<const char*, const char*>{"TERM", "shard"}, {"TERM", "clip.mp4"}, {"HUP", "hup.avi"}}) {
     const auto out = dir / name;
-    const int st = run("timeout --preserve-status -s " + std::string(signal) + " 0.4 " + std::string(ARTRACE_BINARY) + " export " + big.string() +
-                       " --scene " + scene.string() + " -o " + out.string() + " --side-by-side --threads 1 -q > " + log.string() +
-                       " 2>&1");
+    // once the first frame is written
+    const std::string ready = is_video(name) ? "[ -s " + (dir / (out.stem().string() + ".partial" + out.extension().string())).string() + " ]"
+                                             : "[ -e " + (dir / "shard.partial" / "frame_000000.png").string() + " ]";
+    const int st = run_until(std::string(ARTRACE_BINARY) + " export " + big.string() + " --scene " + scene.string() + " -o " + out.string() +
+                                 " --side-by-side --threads 1 -q",
+                             ready, signal, log);
     EXPECT_EQ(st, 1) << signal << " " << name << ": " << ::artrace::test::read_file(log);
     EXPECT_NE(::artrace::test::read_file(log).find("stopped by SIG" + std::string(signal) + ": " + out.string() + " was not written"),
               std::string::npos)
@@ -323,6 +326,56 @@ TEST(Export, StoppedExportLeavesNoFile) {
       EXPECT_EQ(e.path().filename().string().rfind(std::filesystem::path(name).stem().string(), 0), std::string::npos)
           << signal << ": " << e.path() << " left behind";
     }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+/// Two exports to one output at once (two shards given the same folder by mistake, the same
+/// command started in two terminals): the second is refused, naming the output, while the first
+/// runs, and the first's output is whole and its own. Before, the second removed the first's
+/// partial output and wrote its own frames among the first's. A conversion to the same .oni or
+/// TUM folder as one running is refused the same way.
+TEST(Export, SecondWriterOfTheSameOutputIsRefused) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_two_writers");
+  std::filesystem::remove_all(dir);
+  const auto scene = box_scene(dir);
+  const auto big = dir / "big";
+  synth_room(big, 120, 320, 240);
+  const std::string bin = ARTRACE_BINARY, room = (kRoot / "data/recordings/room").string();
+  struct Case {
+    std::string first, second, output, partial;
+  };
+  const Case cases[] = {
+      {"export " + big.string() + " --scene " + scene.string() + " --side-by-side --threads 1 -q",
+       "export " + room + " --scene " + scene.string() + " -q", "frames", "frames.partial"},
+      {"export " + big.string() + " --scene " + scene.string() + " --side-by-side --threads 1 -q",
+       "export " + room + " --scene " + scene.string() + " -q", "clip.avi", "clip.partial.avi"},
+      {"convert " + big.string(), "convert " + room, "tum", "tum.partial"},
+  };
+  for (const Case& c : cases) {
+    const auto out = dir / c.output;
+    // the first in the background, held (SIGSTOP) once its partial output is there while the
+    // second runs, then let go
+    const std::string script = bin + " " + c.first + " -o " + out.string() + " > " + (dir / "first.log").string() + " 2>&1 & first=$!; " +
+                               "for i in $(seq 3000); do [ -e " + (dir / c.partial).string() + " ] && break; sleep 0.01; done; kill -STOP $first; " +
+                               bin + " " + c.second + " -o " + out.string() + " > " + (dir / "second.log").string() + " 2>&1; echo $? > " +
+                               (dir / "second.rc").string() + "; kill -CONT $first; wait $first";
+    EXPECT_EQ(run("bash -c '" + script + "'"), 0) << c.first << ": " << ::artrace::test::read_file(dir / "first.log");
+    EXPECT_EQ(::artrace::test::read_file(dir / "second.rc"), "1\n") << ::artrace::test::read_file(dir / "second.log");
+    EXPECT_NE(::artrace::test::read_file(dir / "second.log").find(out.string() + ": is being written by another process"), std::string::npos)
+        << ::artrace::test::read_file(dir / "second.log");
+  }
+  // the first's outputs, whole: 120 frames of the big recording, side by side
+  int frames = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir / "frames")) frames += e.path().extension() == ".png";
+  EXPECT_EQ(frames, 120);
+  EXPECT_EQ(cv::imread((dir / "frames" / "frame_000119.png").string()).cols, 3 * 320);
+  cv::VideoCapture clip((dir / "clip.avi").string());
+  EXPECT_EQ(static_cast<int>(clip.get(cv::CAP_PROP_FRAME_COUNT)), 120);
+  EXPECT_EQ(open_recording(dir / "tum")->frame_count(), 120);
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().string().find(".partial"), std::string::npos) << e.path() << " left behind";
   }
   std::filesystem::remove_all(dir);
 }

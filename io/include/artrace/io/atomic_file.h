@@ -5,6 +5,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <string_view>
 
 namespace cv {
@@ -22,6 +23,32 @@ void write_file(const std::filesystem::path& path, std::string_view bytes);
 /// under `path` (an earlier file of that name stays) and PATH.partial is removed. Creates the
 /// parent folders.
 void write_file_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+/// The ".partial" file or folder a long write (a clip, a folder of frames, a recording) goes into
+/// before it is renamed into place, held by this process under an advisory lock (flock) for as long
+/// as the object lives. A second writer of the same output is refused, "OUT: is being written by
+/// another process (PARTIAL is in use)", instead of removing the first one's partial output from
+/// under it or mixing its own into it; a partial left by a process that died (its lock went with
+/// it) is removed. The claimed partial is new and empty: made under a unique name, locked, then
+/// renamed to its own without replacing anything. The writer removes or renames it; the destructor
+/// only lets the lock go.
+class PartialOutput {
+ public:
+  enum class Kind { file, folder };
+  /// `out`: the output's name, for messages. Creates the parent folders.
+  PartialOutput(std::filesystem::path partial, Kind kind, std::string out);
+  ~PartialOutput();
+  PartialOutput(PartialOutput&& other) noexcept;
+  PartialOutput& operator=(PartialOutput&&) = delete;
+  PartialOutput(const PartialOutput&) = delete;
+  PartialOutput& operator=(const PartialOutput&) = delete;
+
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+  int fd_ = -1;
+};
 
 /// `image` (8-bit BGR or grey, or 16-bit grey) encoded as PNG in memory, then written by
 /// write_file_atomically(), or by write_file() (`atomically` false: into a folder that is itself

@@ -1,13 +1,17 @@
 // Writes ONI recordings (OpenNI 1.0.1.0 container, codec NONE) with one depth stream
 // (DEPTH_1_MM, 16-bit millimetres) and one colour stream (RGB888) that OpenNI2's own file driver
 // plays back. Layout and traps: shared/docs/oni-format.md. The file appears under its final name
-// only when close() succeeds; until then it is written to "<name>.partial", which the destructor
-// removes if close() was never reached.
+// only when close() succeeds; until then it is written to "<name>.partial" (claimed: another
+// process writing the same file is refused), which the destructor removes if close() was never
+// reached.
 #pragma once
+
+#include "artrace/io/atomic_file.h"
 
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -59,6 +63,7 @@ class OniWriter {
   uint64_t tell() const;
 
   std::filesystem::path path_, partial_;
+  std::unique_ptr<PartialOutput> claim_;  ///< partial_, held while it is written
   std::FILE* file_ = nullptr;
   Node depth_{1}, color_{2};
   uint32_t frames_ = 0;
