@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <set>
 #include <sstream>
 
@@ -220,6 +221,15 @@ void resolve_anchors(ArSceneFile& scene, ar::FrameSource& recording) {
     ar::SensorFrame f;
     recording.seek(p.anchor->frame);
     if (!recording.next(f)) throw ParseError(scene.file.string(), 0, 0, at + ".frame: no frame " + std::to_string(p.anchor->frame));
+    if (!f.world_from_camera) {
+      if (const auto span = recording.trajectory_span()) {  // else a fixed camera: the world is the camera's frame
+        char why[160];
+        std::snprintf(why, sizeof why, "(t = %.6f s) has no camera pose: the trajectory runs from %.6f to %.6f s, with none in gaps over 0.1 s",
+                      f.color_time_s, span->first, span->second);
+        throw ParseError(scene.file.string(), 0, 0, at + ".frame: frame " + std::to_string(p.anchor->frame) + " " + why +
+                                                        "; anchor on a frame it covers");
+      }
+    }
     if (p.anchor->u >= f.depth.width || p.anchor->v >= f.depth.height) {
       throw ParseError(scene.file.string(), 0, 0, at + ".pixel: (" + std::to_string(p.anchor->u) + ", " + std::to_string(p.anchor->v) +
                                                       ") lies outside the " + std::to_string(f.depth.width) + "x" +

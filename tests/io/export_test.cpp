@@ -231,6 +231,36 @@ TEST(Export, RecordingWithoutATrajectoryIsCompositedWithAFixedCameraAndAWarning)
   std::filesystem::remove_all(dir);
 }
 
+/// An anchor on a frame its recording's trajectory gives no pose is refused, naming the scene, the
+/// anchor and the frame: the plane found there is in the camera's coordinates, and was taken as
+/// the world's, standing the model wherever that put it. On a frame the trajectory covers the
+/// anchor stands the model in the picture.
+TEST(Export, AnchorOnAFrameWithoutAPoseIsRefused) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_anchor_no_pose");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto poses = dir / "poses.txt";
+  std::ofstream(poses) << "1.5 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 0 1\n";  // frames 15-30 of the room
+  const auto room = kRoot / "data/recordings/room";
+  const auto log = dir / "log.txt";
+  auto anchored_at = [&](int frame) {
+    const auto scene = dir / ("anchored_" + std::to_string(frame) + ".json");
+    std::ofstream(scene) << R"({ "models": [ { "file": ")" << (kRoot / "data/models/spinning_box.gltf").string()
+                         << R"(", "scale": 0.5, "anchor": { "frame": )" << frame << R"(, "pixel": [160, 200] } } ],
+                            "lights": [ { "position": [0, -1, 0], "color": [1, 1, 1] } ], "ambient": 1.0 })";
+    return run(std::string(ARTRACE_BINARY) + " export " + room.string() + " --scene " + scene.string() + " --trajectory " + poses.string() +
+               " --frames 15:16 -q -o " + (dir / ("out_" + std::to_string(frame))).string() + " > " + log.string() + " 2>&1");
+  };
+  EXPECT_EQ(anchored_at(3), 1);
+  EXPECT_NE(::artrace::test::read_file(log).find("anchored_3.json: models[0].anchor.frame: frame 3 (t = 1.100000 s) has no camera pose"),
+            std::string::npos)
+      << ::artrace::test::read_file(log);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out_3"));
+  EXPECT_EQ(anchored_at(15), 0) << ::artrace::test::read_file(log);
+  std::filesystem::remove_all(dir);
+}
+
 /// A recording whose depth frames are of another size than its colour frames (an .oni recorded
 /// with QVGA depth and VGA colour) is refused by the AR commands, naming it and both sizes: the
 /// compositor reads each colour pixel's depth at the same pixel, and without it drew the models
