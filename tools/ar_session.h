@@ -52,6 +52,7 @@ class ArSession {
       }
     }
     source_ = open_recording(recording, args.rec, quiet);
+    require_poses_in_time(args.rec.trajectory.empty() ? recording + "'s trajectory" : args.rec.trajectory);
     io::resolve_anchors(scene_file_, *source_);
     runtime_ = std::make_unique<io::ArRuntime>(scene_file_);
     const std::string room = !args.room.empty() ? args.room : scene_file_.room ? scene_file_.room->string() : std::string();
@@ -65,6 +66,29 @@ class ArSession {
     for (const io::ArModelPlacement& p : scene_file_.models) {
       if (p.support) options_.support_planes.push_back(*p.support);
     }
+  }
+
+  /// Refuses a trajectory that covers none of the frames' times: its clock is not theirs, and every
+  /// frame would come out as recorded.
+  void require_poses_in_time(const std::string& trajectory) {
+    const auto span = source_->trajectory_span();
+    const int64_t count = source_->frame_count().value_or(0);
+    if (!span || count <= 0) return;
+    ar::SensorFrame first, last;
+    source_->seek(0);
+    if (!source_->next(first)) return;
+    source_->seek(count - 1);
+    if (!source_->next(last)) last = first;
+    source_->seek(0);
+    if (last.color_time_s >= span->first && first.color_time_s <= span->second) return;
+    auto seconds = [](double t) {
+      char s[40];
+      std::snprintf(s, sizeof s, "%.6f", t);
+      return std::string(s);
+    };
+    throw std::runtime_error(trajectory + ": its poses run from " + seconds(span->first) + " to " + seconds(span->second) + " s, the frames of " +
+                             recording_ + " from " + seconds(first.color_time_s) + " to " + seconds(last.color_time_s) +
+                             " s: no frame has a camera pose (are their times on different clocks?)");
   }
 
   ar::FrameSource& source() { return *source_; }

@@ -261,6 +261,32 @@ TEST(Export, AnchorOnAFrameWithoutAPoseIsRefused) {
   std::filesystem::remove_all(dir);
 }
 
+/// A trajectory that covers none of the recording's frames (its times on another clock: a motion
+/// capture's against the camera's, or one recording's poses given to another) is refused before
+/// any work, naming both spans; before, every frame was exported as recorded, without the virtual
+/// objects, and the export succeeded with a warning.
+TEST(Export, TrajectoryMissingEveryFrameIsRefused) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_far_trajectory");
+  std::filesystem::remove_all(dir);
+  const auto scene = box_ahead_of_origin(dir);
+  const auto far = dir / "far.txt";
+  std::ofstream(far) << "100 0 0 0 0 0 0 1\n102 0 0 0 0 0 0 1\n";
+  const auto log = dir / "log.txt";
+  for (const std::string cmd : {"export", "bench-ar"}) {
+    const std::string out = cmd == "export" ? " -o " + (dir / "clip.mp4").string() : " --frames 2";
+    EXPECT_EQ(run(std::string(ARTRACE_BINARY) + " " + cmd + " " + (kRoot / "data/recordings/room").string() + " --scene " + scene.string() +
+                  " --trajectory " + far.string() + out + " > " + log.string() + " 2>&1"),
+              1);
+    EXPECT_NE(::artrace::test::read_file(log).find(far.string() + ": its poses run from 100.000000 to 102.000000 s, the frames of " +
+                                                  (kRoot / "data/recordings/room").string() + " from 1.000000 to 1.966667 s"),
+              std::string::npos)
+        << ::artrace::test::read_file(log);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "clip.mp4"));
+  std::filesystem::remove_all(dir);
+}
+
 /// A recording whose depth frames are of another size than its colour frames (an .oni recorded
 /// with QVGA depth and VGA colour) is refused by the AR commands, naming it and both sizes: the
 /// compositor reads each colour pixel's depth at the same pixel, and without it drew the models
