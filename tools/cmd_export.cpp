@@ -32,6 +32,22 @@ struct Options {
   ClipOptions clip;  ///< and the frame rate a shard records
 };
 
+/// What makes a shard's frames besides their numbers: join refuses shards that differ in any.
+nlohmann::json settings(const Options& opt) {
+  std::error_code ec;
+  const std::filesystem::path recording = std::filesystem::weakly_canonical(opt.recording, ec);
+  return {{"recording", ec ? opt.recording : recording.string()},
+          {"scene", file_digest(opt.ar.scene)},
+          {"room", file_digest(opt.ar.room)},
+          {"trajectory", file_digest(opt.ar.rec.trajectory)},
+          {"intrinsics", file_digest(opt.ar.rec.intrinsics)},
+          {"depth_scale", opt.ar.rec.depth_scale},
+          {"depth_shift", opt.ar.rec.depth_shift},
+          {"no_occlusion", opt.no_occlusion},
+          {"no_shadows", opt.no_shadows},
+          {"side_by_side", opt.side_by_side}};
+}
+
 void run(const Options& opt) {
   check_output_name(opt.output);
   check_outputs({{opt.output, clip_or_frames(opt.output)}}, ar_inputs(opt.recording, opt.ar));
@@ -121,7 +137,7 @@ void run(const Options& opt) {
   if (!video) {
     // a folder of frames is a shard: it says which frames of which recording it holds, for join
     try {
-      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.clip.fps});
+      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.clip.fps, settings(opt)});
     } catch (...) {
       cleanup();
       throw;

@@ -31,6 +31,9 @@ void run_join(const JoinOptions& opt) {
   for (const std::string& s : opt.shards) shards.push_back(read_shard_info(s));
   const ShardInfo& a = shards.front();
   for (const ShardInfo& s : shards) {
+    if (const std::string d = settings_difference(a.settings, s.settings); !d.empty()) {
+      throw std::runtime_error(s.folder.string() + " is not a shard of the same export as " + a.folder.string() + ": its " + d);
+    }
     if (s.recording_frames != a.recording_frames || s.width != a.width || s.height != a.height) {
       throw std::runtime_error(s.folder.string() + " is not a shard of the same export as " + a.folder.string() + " (" +
                                std::to_string(s.recording_frames) + " frames of " + std::to_string(s.width) + "x" +
@@ -89,7 +92,7 @@ void run_join(const JoinOptions& opt) {
       if (!opt.quiet) std::fprintf(stderr, "\rframe %lld/%lld   ", static_cast<long long>(k - range.first + 1), static_cast<long long>(range.end - range.first));
     }
     if (writer) writer->finish();
-    if (!video) write_shard_info({partial, a.recording, range.first, range.end, a.recording_frames, a.width, a.height, fps});
+    if (!video) write_shard_info({partial, a.recording, range.first, range.end, a.recording_frames, a.width, a.height, fps, a.settings});
   } catch (...) {
     stop.reset();
     if (!opt.quiet) std::fprintf(stderr, "\n");

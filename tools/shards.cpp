@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <fstream>
 #include <iterator>
 #include <stdexcept>
 
@@ -54,7 +55,7 @@ std::filesystem::path frame_png(const std::filesystem::path& folder, int64_t ind
 void write_shard_info(const ShardInfo& s) {
   const nlohmann::json j = {{"recording", s.recording}, {"first", s.first},   {"end", s.end},
                             {"recording_frames", s.recording_frames},       {"width", s.width},
-                            {"height", s.height},       {"fps", s.fps}};
+                            {"height", s.height},       {"fps", s.fps},     {"settings", s.settings}};
   io::write_file(s.folder / kShardManifest, j.dump(2) + "\n");
 }
 
@@ -77,7 +78,9 @@ ShardInfo read_shard_info(const std::filesystem::path& folder) {
     s.width = j.at("width").get<int>();
     s.height = j.at("height").get<int>();
     s.fps = j.at("fps").get<double>();
-  } catch (const nlohmann::json::exception& e) {
+    if (j.contains("settings")) s.settings = j.at("settings");
+    if (!s.settings.is_object()) throw std::runtime_error("\"settings\" is not an object");
+  } catch (const std::exception& e) {
     throw std::runtime_error(file.string() + ": " + e.what());
   }
   if (s.first < 0 || s.end <= s.first || s.recording_frames < s.end || s.width <= 0 || s.height <= 0 || !(s.fps > 0.0)) {
@@ -86,6 +89,32 @@ ShardInfo read_shard_info(const std::filesystem::path& folder) {
                              std::to_string(s.width) + "x" + std::to_string(s.height) + ")");
   }
   return s;
+}
+
+std::string file_digest(const std::string& path) {
+  if (path.empty()) return "";
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(path + ": cannot open file");
+  uint64_t h = 14695981039346656037ull;  // FNV-1a
+  char buf[1 << 16];
+  while (in.read(buf, sizeof buf) || in.gcount() > 0) {
+    for (std::streamsize i = 0; i < in.gcount(); ++i) h = (h ^ static_cast<unsigned char>(buf[i])) * 1099511628211ull;
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return hex;
+}
+
+std::string settings_difference(const nlohmann::json& a, const nlohmann::json& b) {
+  if (a.empty() || b.empty()) return "";
+  for (auto it = a.begin(); it != a.end(); ++it) {
+    const nlohmann::json other = b.contains(it.key()) ? b.at(it.key()) : nlohmann::json();
+    if (other != it.value()) return it.key() + " differs (" + other.dump() + " against " + it.value().dump() + ")";
+  }
+  for (auto it = b.begin(); it != b.end(); ++it) {
+    if (!a.contains(it.key())) return it.key() + " differs (" + it.value().dump() + " against null)";
+  }
+  return "";
 }
 
 std::vector<std::string> coverage_problems(std::vector<ShardInfo> shards, int64_t first, int64_t end) {

@@ -33,7 +33,17 @@ struct ShardInfo {
   int64_t recording_frames = 0;
   int width = 0, height = 0;
   double fps = 30.0;
+  /// What makes the frames besides their numbers (the recording, digests of the scene and the
+  /// other input files, the options that change a picture); empty in shards written without it.
+  nlohmann::json settings = nlohmann::json::object();
 };
+
+/// A digest (64-bit FNV-1a, hexadecimal) of a file's bytes, "" for an empty path: whether two
+/// shards were made from the same scene, room, trajectory or intrinsics file.
+std::string file_digest(const std::string& path);
+/// The first setting in which two shards' settings differ, as "KEY differs (A against B)"; ""
+/// when they agree or either has none.
+std::string settings_difference(const nlohmann::json& a, const nlohmann::json& b);
 
 constexpr const char* kShardManifest = "shard.json";
 

@@ -175,6 +175,49 @@ TEST(Shards, JoinRefusesOverlappingShards) {
   std::filesystem::remove_all(dir);
 }
 
+/// Shards of different exports are not joined: a shard records what makes its frames (the
+/// recording, the scene's and the other input files' contents, the options that change a
+/// picture), and join refuses shards that differ in any, naming the shard and what differs. Before,
+/// shards of the same recording with another scene, or with shadows off, were joined into one
+/// clip that changed its picture part-way. The thread count changes no picture, and is free.
+TEST(Shards, JoinRefusesShardsOfDifferentExports) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = fresh("artrace_shards_mixed");
+  const auto other_scene = box_scene(dir / "other");
+  ASSERT_EQ(run(export_cmd(dir / "a", "0:15") + " --threads 1 > /dev/null"), 0);
+  ASSERT_EQ(run(export_cmd(dir / "b", "15:30") + " --threads 2 > /dev/null"), 0);
+  ASSERT_EQ(run(bin() + " export " + kRoom + " --scene " + other_scene.string() + " -q --frames 15:30 -o " + (dir / "other_b").string() +
+                " > /dev/null"),
+            0);
+  ASSERT_EQ(run(export_cmd(dir / "dark_b", "15:30") + " --no-shadows > /dev/null"), 0);
+  // the same scene file, changed between the shards
+  const auto edited = box_scene(dir / "edited");
+  ASSERT_EQ(run(bin() + " export " + kRoom + " --scene " + edited.string() + " -q --frames 0:15 -o " + (dir / "edited_a").string() +
+                " > /dev/null"),
+            0);
+  std::ofstream(edited, std::ios::app) << "\n";
+  ASSERT_EQ(run(bin() + " export " + kRoom + " --scene " + edited.string() + " -q --frames 15:30 -o " +
+                (dir / "edited_b").string() + " > /dev/null"),
+            0);
+  std::string out;
+  const std::pair<std::string, std::string> refused[] = {
+      {"other_b", "scene"}, {"dark_b", "no_shadows"}};
+  for (const auto& [second, what] : refused) {
+    EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / second).string() + " -o " + (dir / "clip.mp4").string(), out, dir), 1);
+    EXPECT_NE(out.find((dir / second).string() + " is not a shard of the same export as " + (dir / "a").string() + ": its " + what + " differs"),
+              std::string::npos)
+        << out;
+    expect_nothing_written(dir / "clip.mp4");
+  }
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "edited_a").string() + " " + (dir / "edited_b").string() + " -o " + (dir / "clip.mp4").string(), out, dir), 1);
+  EXPECT_NE(out.find((dir / "edited_b").string() + " is not a shard of the same export as " + (dir / "edited_a").string() + ": its scene differs"),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(run_capture(bin() + " join " + (dir / "a").string() + " " + (dir / "b").string() + " -o " + (dir / "clip.mp4").string(), out, dir), 0)
+      << out;
+  std::filesystem::remove_all(dir);
+}
+
 /// A join that fails part-way (a shard's frame unreadable) leaves nothing; so does a shard that
 /// never finished (a .partial folder without shard.json), which is refused by name.
 TEST(Shards, InterruptedJoinAndUnfinishedShardLeaveNothing) {
