@@ -74,6 +74,18 @@ std::string foreign_entry(const fs::path& folder, OutputKind kind) {
   return "";
 }
 
+/// Whether a path inside an input folder (relative to it) is one the readers read there: a
+/// recording's lists, trajectory, intrinsics and image folders, or a shard's frames and manifest.
+bool read_there(const fs::path& rel) {
+  const std::string first = rel.begin()->string();
+  static const char* const kRead[] = {"rgb",           "depth",           "color",          "rgb.txt",
+                                      "depth.txt",     "groundtruth.txt", "trajectory.txt", "intrinsics.txt",
+                                      "intrinsics.json", "camera_intrinsic.json", "camera.yaml", "camera_info.yaml",
+                                      "calibration.yaml", kShardManifest};
+  return std::find(std::begin(kRead), std::end(kRead), first) != std::end(kRead) || fs::path(first).stem() == "color" ||
+         is_frame_png(first);
+}
+
 void check_output(const Output& out, const std::vector<std::string>& inputs) {
   const fs::path o = resolved(out.path);
   auto refuse = [&](const std::string& why) { throw std::invalid_argument(out.path + ": " + why + " (nothing written)"); };
@@ -83,8 +95,8 @@ void check_output(const Output& out, const std::vector<std::string>& inputs) {
     if (o == i) refuse("is the input " + in);
     if (inside(i, o)) refuse("holds the input " + in + ", which writing it would replace");
     std::error_code ec;
-    if (inside(o, i) && fs::exists(fs::symlink_status(out.path, ec))) {
-      refuse("lies inside the input " + in + " and is there already: replacing it would change that input; choose another name");
+    if (inside(o, i) && read_there(o.lexically_relative(i))) {
+      refuse("lies inside the input " + in + ", which reads it: writing it would change that input; choose another name");
     }
   }
   std::error_code ec;

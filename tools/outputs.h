@@ -23,8 +23,8 @@ struct Output {
 
 /// Throws std::invalid_argument naming the output and why, when writing it would replace
 /// - one of `inputs` (the same path once links and "." and ".." are resolved), or a folder holding one;
-/// - anything already inside an input that is a folder (a recording's rgb.txt or rgb/; a new name
-///   there is fine);
+/// - what the readers read inside an input folder (a recording's rgb.txt, groundtruth.txt, rgb/ or
+///   intrinsics, a shard's frames; other names there are fine, new or not);
 /// - a folder that holds an entry this kind of output does not write (checked one level down
 ///   for a TUM folder's rgb/ and depth/): the folder is someone else's;
 /// - a file where a folder goes, or a folder where a file goes;

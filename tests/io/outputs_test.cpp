@@ -26,8 +26,9 @@ std::map<std::string, std::string> snapshot(const std::filesystem::path& dir) {
 }
 
 /// Each command is refused, before any work and naming the path and why, when its output would
-/// replace one of its inputs (the recording, the scene, a shard), a folder holding an input, an
-/// existing file or folder inside an input recording, a folder of files the command did not write,
+/// replace one of its inputs (the recording, the scene, a shard), a folder holding an input, a
+/// file or folder an input recording's reader reads (its lists, trajectory, intrinsics, images), a
+/// folder of files the command did not write,
 /// a file where a folder goes or a folder where a file goes, or its own other output. What was
 /// there is left as it was. The outputs a command did write before (a folder of frames, a TUM
 /// folder, a clip) are replaced as before.
@@ -102,8 +103,12 @@ TEST(Cli, OutputsNeverReplaceInputsOrFoldersOfOtherFiles) {
   std::filesystem::create_directories(dir / "empty");
   ASSERT_EQ(artrace("export " + r + s + " -o " + (dir / "empty").string()), 0) << ::artrace::test::read_file(log);
   EXPECT_TRUE(std::filesystem::exists(dir / "empty" / "shard.json"));
-  // a new output inside the recording's folder is not a replacement
+  // an output inside the recording's folder under a name no reader reads is fine, new or not
   ASSERT_EQ(artrace("track " + r + " --frames 3 -o " + (rec / "estimated.txt").string()), 0) << ::artrace::test::read_file(log);
+  ASSERT_EQ(artrace("track " + r + " --frames 3 -o " + (rec / "estimated.txt").string()), 0) << ::artrace::test::read_file(log);
+  // but not a name its reader would read (a camera file), although nothing has it yet
+  EXPECT_NE(artrace("track " + r + " --frames 3 -o " + (rec / "camera.yaml").string()), 0);
+  EXPECT_NE(::artrace::test::read_file(log).find("lies inside the input " + r), std::string::npos);
   std::filesystem::remove_all(dir);
 }
 
