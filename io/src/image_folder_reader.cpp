@@ -22,13 +22,54 @@ std::filesystem::path find_video(const std::filesystem::path& folder) {
   return {};
 }
 
+bool is_digit(char c) { return c >= '0' && c <= '9'; }
+
+/// Names in natural order: runs of digits compare as numbers ("9" before "10"), the rest as text;
+/// equal so far, the plain order decides ("01" and "1").
+bool natural_less(const std::string& a, const std::string& b) {
+  size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (is_digit(a[i]) && is_digit(b[j])) {
+      size_t ei = i, ej = j;
+      while (ei < a.size() && is_digit(a[ei])) ++ei;
+      while (ej < b.size() && is_digit(b[ej])) ++ej;
+      size_t si = i, sj = j;  // without leading zeros
+      while (si + 1 < ei && a[si] == '0') ++si;
+      while (sj + 1 < ej && b[sj] == '0') ++sj;
+      if (ei - si != ej - sj) return ei - si < ej - sj;
+      if (const int c = a.compare(si, ei - si, b, sj, ej - sj); c != 0) return c < 0;
+      i = ei;
+      j = ej;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  if (i < a.size() || j < b.size()) return j < b.size() && i == a.size();
+  return a < b;
+}
+
 std::vector<std::filesystem::path> sorted_files(const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> out;
   for (const auto& e : std::filesystem::directory_iterator(dir)) {
     if (e.is_regular_file() && e.path().filename().string()[0] != '.') out.push_back(e.path());
   }
-  std::sort(out.begin(), out.end());
+  std::sort(out.begin(), out.end(), [](const std::filesystem::path& a, const std::filesystem::path& b) {
+    return natural_less(a.filename().string(), b.filename().string());
+  });
   return out;
+}
+
+/// The last run of digits in a file's stem, as a number without leading zeros; "" without one.
+std::string last_number(const std::filesystem::path& p) {
+  const std::string s = p.stem().string();
+  size_t e = s.size();
+  while (e > 0 && !is_digit(s[e - 1])) --e;
+  size_t b = e;
+  while (b > 0 && is_digit(s[b - 1])) --b;
+  while (b + 1 < e && s[b] == '0') ++b;
+  return s.substr(b, e - b);
 }
 
 }  // namespace
@@ -60,6 +101,14 @@ ImageFolderReader::ImageFolderReader(const std::filesystem::path& folder, const 
     if (color_files_.size() != depth_files_.size()) {
       throw ParseError(folder.string(), 0, 0, "color/ has " + std::to_string(color_files_.size()) +
                                                   " images, depth/ " + std::to_string(depth_files_.size()));
+    }
+    for (size_t k = 0; k < color_files_.size(); ++k) {
+      const std::string c = last_number(color_files_[k]), d = last_number(depth_files_[k]);
+      if (!c.empty() && !d.empty() && c != d) {
+        warnings_.push_back(color_files_[k].string() + " pairs with " + depth_files_[k].string() +
+                            ": frames pair by their order in color/ and depth/, and these names' numbers differ");
+        break;
+      }
     }
   } else {
     video_ = std::make_unique<Video>();

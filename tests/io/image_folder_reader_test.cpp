@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <algorithm>
 #include <fstream>
 
 namespace artrace::io {
@@ -59,6 +60,41 @@ TEST(ImageFolder, ImagePairsInOrderWithDepthInMetres) {
   EXPECT_FLOAT_EQ(f.depth.at(0, 0), 1.2f);
   std::filesystem::remove(dir / "color" / "003.png");
   EXPECT_THROW(open_recording(dir), ParseError) << "3 colour images for 4 depth images";
+  std::filesystem::remove_all(dir);
+}
+
+/// Numbers in file names count as numbers (0.png, 1.png, ..., 10.png: ten comes after nine, as
+/// capture tools that do not pad their numbers mean it, not after one), and a frame whose colour
+/// and depth names carry different numbers is paired by order with a warning naming both.
+TEST(ImageFolder, NumberedNamesAreInNumericOrder) {
+  const auto dir = ::artrace::test::scratch_path("artrace_imgfolder_numbers");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "color");
+  std::filesystem::create_directories(dir / "depth");
+  for (int k = 0; k < 12; ++k) {
+    cv::imwrite((dir / "color" / ("color_" + std::to_string(k) + ".png")).string(), cv::Mat(4, 5, CV_8UC3, cv::Scalar(10 * k, 0, 0)));
+    cv::imwrite((dir / "depth" / ("depth_" + std::to_string(k) + ".png")).string(), cv::Mat(4, 5, CV_16UC1, cv::Scalar(1000 + 100 * k)));
+  }
+  auto src = open_recording(dir);
+  ar::SensorFrame f;
+  for (int k = 0; k < 12; ++k) {
+    ASSERT_TRUE(src->next(f));
+    EXPECT_EQ(f.color.at(0, 0)[2], 10 * k) << "frame " << k;
+    EXPECT_FLOAT_EQ(f.depth.at(0, 0), 1.0f + 0.1f * k) << "frame " << k;
+  }
+  for (const std::string& w : src->warnings()) EXPECT_EQ(w.find("pairs"), std::string::npos) << w;
+  // depth numbered from 1: paired by order, said once
+  std::filesystem::remove_all(dir / "depth");
+  std::filesystem::create_directories(dir / "depth");
+  for (int k = 1; k <= 12; ++k) {
+    cv::imwrite((dir / "depth" / ("depth_" + std::to_string(k) + ".png")).string(), cv::Mat(4, 5, CV_16UC1, cv::Scalar(1000)));
+  }
+  const auto warnings = open_recording(dir)->warnings();
+  EXPECT_EQ(std::count_if(warnings.begin(), warnings.end(), [&](const std::string& w) {
+              return w.find((dir / "color" / "color_0.png").string() + " pairs with " + (dir / "depth" / "depth_1.png").string()) !=
+                     std::string::npos;
+            }),
+            1);
   std::filesystem::remove_all(dir);
 }
 

@@ -1,6 +1,8 @@
 // Plain OpenCV sources: a folder holding depth/ (16-bit PNGs, `depth_per_metre` units, 1000 = mm by
 // default, with a warning) and either color/ (images, any format OpenCV reads) or one colour video color.<ext>
-// (mp4, avi, mkv, mov). Frames pair by sorted file name / video order; frame k is at k / fps seconds.
+// (mp4, avi, mkv, mov). Frames pair by file names in natural order (numbers as numbers: 9.png
+// before 10.png) / video order, with a warning where a pair's names carry different numbers; frame
+// k is at k / fps seconds.
 // Optional: trajectory.txt (TUM format, poses at those times) and an intrinsics file (intrinsics_file.h;
 // without one, defaults with a warning).
 #pragma once
