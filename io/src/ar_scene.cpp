@@ -146,6 +146,9 @@ ArSceneFile load_ar_scene(const std::filesystem::path& path) {
         p.anchor = k;
       }
       GltfModel model = load_gltf(p.file);
+      if (model.triangle_count() == 0) {
+        c.fail(at + ".file", p.file.string() + " holds no triangles to draw (no mesh, or only points and lines)");
+      }
       if (m.contains("animation")) {
         const json& a = m["animation"];
         c.keys(a, at + ".animation", {"clip", "speed"});

@@ -303,6 +303,14 @@ TEST(ArSceneFile, ValuesWithoutAMeaningAreRefused) {
     const std::string what = scene_error(dir, text);
     EXPECT_NE(what.find((dir / "scene.json").string() + ": " + expected), std::string::npos) << text << ": " << what;
   }
+  // a model with nothing to draw (a node without a mesh; points and lines only): before, the scene
+  // was composited without it and without a word
+  std::ofstream(dir / "empty.gltf") << R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"nodes":[{"name":"camera"}],"scene":0})";
+  const std::string empty = scene_error(dir, R"({ "models": [ { "file": "empty.gltf" } ] })");
+  EXPECT_NE(empty.find((dir / "scene.json").string() + ": models[0].file: " + (dir / "empty.gltf").string() +
+                       " holds no triangles to draw"),
+            std::string::npos)
+      << empty;
   std::ofstream(dir / "scene.json") << model(R"("scale": -1, "material": { "kind": "glass", "ior": 1, "metallic": 1,
       "roughness": 0, "base_color": [0, 1, 1] })").insert(1, R"( "ambient": 1, "lights": [ { "position": [0, 1, 0], "color": [0, 5, 0] } ], )");
   const ArSceneFile ok = load_ar_scene(dir / "scene.json");
