@@ -97,6 +97,9 @@ class ArSession {
   const ar::FusedRoom* room() const { return room_.get(); }
   /// Frames composite() gave back as recorded, for want of a pose.
   int64_t frames_without_pose() const { return frames_without_pose_; }
+  /// Frames composited with a camera, and those in which a virtual object's bounds came into view.
+  int64_t frames_posed() const { return frames_posed_; }
+  int64_t frames_in_view() const { return frames_in_view_; }
 
   /// The models moved to the frame's time, and the frame composited. `update_ms` (optional): the
   /// time the models took to move. A frame that the recording's trajectory gives no pose (it lies
@@ -133,7 +136,12 @@ class ArSession {
     if (update_ms) *update_ms = u;
     options_.object_bounds = runtime_->object_bounds();
     const io::ArRuntime& rt = *runtime_;
-    return ar::composite(f, rt.scene(), [&rt](const ar::SurfaceQuery& q) { return rt.material(q); }, options_, st);
+    ar::CompositeStats local;
+    ar::CompositeStats& stats = st ? *st : local;
+    ar::ColorImage out = ar::composite(f, rt.scene(), [&rt](const ar::SurfaceQuery& q) { return rt.material(q); }, options_, &stats);
+    ++frames_posed_;
+    if (stats.traced_pixels > 0) ++frames_in_view_;
+    return out;
   }
 
  private:
@@ -143,7 +151,7 @@ class ArSession {
   std::unique_ptr<io::ArRuntime> runtime_;
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
-  int64_t frames_without_pose_ = 0;
+  int64_t frames_without_pose_ = 0, frames_posed_ = 0, frames_in_view_ = 0;
   bool warned_fixed_camera_ = false;
   ar::CompositeOptions options_;
 };

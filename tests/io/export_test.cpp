@@ -287,6 +287,27 @@ TEST(Export, TrajectoryMissingEveryFrameIsRefused) {
   std::filesystem::remove_all(dir);
 }
 
+/// An export in which no virtual object came into view in any frame (models placed in another
+/// frame of reference than the trajectory's world, or behind the camera) ends with a warning
+/// saying so, instead of a clip of the recording as it was and no word; one in which they did,
+/// without it.
+TEST(Export, ModelsNeverInViewAreWarnedAbout) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_out_of_view");
+  std::filesystem::remove_all(dir);
+  const auto log = dir / "log.txt";
+  auto exported = [&](const std::filesystem::path& scene) {
+    return run(std::string(ARTRACE_BINARY) + " export " + (kRoot / "data/recordings/room").string() + " --scene " + scene.string() +
+               " --frames 0:3 -q -o " + (dir / "out").string() + " > " + log.string() + " 2>&1");
+  };
+  ASSERT_EQ(exported(box_scene(dir / "far", "[100, 100, 100]")), 0) << ::artrace::test::read_file(log);
+  EXPECT_NE(::artrace::test::read_file(log).find("warning: no virtual object came into view in any of the 3 frames"), std::string::npos)
+      << ::artrace::test::read_file(log);
+  ASSERT_EQ(exported(box_scene(dir / "near")), 0) << ::artrace::test::read_file(log);
+  EXPECT_EQ(::artrace::test::read_file(log).find("came into view"), std::string::npos) << ::artrace::test::read_file(log);
+  std::filesystem::remove_all(dir);
+}
+
 /// A recording whose depth frames are of another size than its colour frames (an .oni recorded
 /// with QVGA depth and VGA colour) is refused by the AR commands, naming it and both sizes: the
 /// compositor reads each colour pixel's depth at the same pixel, and without it drew the models
