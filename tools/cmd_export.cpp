@@ -18,6 +18,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 
@@ -29,8 +31,21 @@ struct Options {
   ArArgs ar;
   int first = 0, last = -1;
   bool side_by_side = false, no_occlusion = false, no_shadows = false, quiet = false;
-  ClipOptions clip;  ///< and the frame rate a shard records
+  ClipOptions clip{0.0};  ///< and the frame rate a shard records; 0: the recording's
 };
+
+/// A recording's frame rate: its frames over their time span, to a thousandth (30 for one frame).
+double recording_rate(ar::FrameSource& source, int64_t count) {
+  ar::SensorFrame a, b;
+  source.seek(0);
+  const bool first = count >= 2 && source.next(a);
+  if (first) source.seek(count - 1);
+  const bool last = first && source.next(b);
+  source.seek(0);
+  const double span = last ? b.color_time_s - a.color_time_s : 0.0;
+  if (!(span > 0.0)) return 30.0;
+  return std::clamp(std::round(1000.0 * static_cast<double>(count - 1) / span) / 1000.0, 1.0, 1000.0);
+}
 
 /// What makes a shard's frames besides their numbers: join refuses shards that differ in any.
 nlohmann::json settings(const Options& opt) {
@@ -65,6 +80,8 @@ void run(const Options& opt) {
   }
   last = last >= 0 ? std::min<int64_t>(last, count - 1) : count - 1;
   if (first < 0 || first > last) throw std::invalid_argument("frame range " + std::to_string(first) + ".." + std::to_string(last) + " is empty");
+  ClipOptions clip = opt.clip;
+  if (clip.fps <= 0.0) clip.fps = recording_rate(source, count);
   source.seek(first);
 
   const std::filesystem::path out(opt.output);
@@ -112,7 +129,7 @@ void run(const Options& opt) {
       frame_ms.push_back(ms_since(t0));
       const auto tw = std::chrono::steady_clock::now();
       if (video) {
-        if (!writer) writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), opt.clip);
+        if (!writer) writer = std::make_unique<ClipWriter>(partial, out.string(), img.size(), clip);
         writer->write(img);
       } else {
         io::write_png(frame_png(partial, first + k), img, /*atomically=*/false);  // the folder is partial until the end
@@ -137,7 +154,7 @@ void run(const Options& opt) {
   if (!video) {
     // a folder of frames is a shard: it says which frames of which recording it holds, for join
     try {
-      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, opt.clip.fps, settings(opt)});
+      write_shard_info({partial, opt.recording, first, last + 1, count, width, height, clip.fps, settings(opt)});
     } catch (...) {
       cleanup();
       throw;
@@ -181,7 +198,8 @@ void add_export_command(CLI::App& app) {
   cmd->add_option("--first", opt->first, "first frame")->capture_default_str()->check(CLI::Range(0, 100000000));
   cmd->add_option("--last", opt->last, "last frame (-1: to the end)")->capture_default_str()->check(CLI::Range(-1, 100000000));
   cmd->add_flag("--side-by-side", opt->side_by_side, "composite, original and depth side by side");
-  cmd->add_option("--fps", opt->clip.fps, "frame rate of a video clip")->capture_default_str()->check(finite_range(1.0, 1000.0));
+  cmd->add_option("--fps", opt->clip.fps, "frame rate of a video clip (default: the recording's, its frames over their time span)")
+      ->check(finite_range(1.0, 1000.0));
   add_clip_options(cmd, opt->clip);
   cmd->add_flag("--no-occlusion", opt->no_occlusion, "draw the virtual objects over everything");
   cmd->add_flag("--no-shadows", opt->no_shadows, "no shadow rays");

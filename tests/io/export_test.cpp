@@ -308,6 +308,41 @@ TEST(Export, ModelsNeverInViewAreWarnedAbout) {
   std::filesystem::remove_all(dir);
 }
 
+/// A clip plays at its recording's rate unless --fps says otherwise: a 10 Hz recording gives a
+/// 10 frames/s clip, and its shards record 10 for join (before, every clip was 30 frames/s,
+/// playing a 10 Hz recording three times too fast).
+TEST(Export, ClipsPlayAtTheRecordingsRate) {
+  ARTRACE_REQUIRE_BINARY();
+  const auto dir = ::artrace::test::scratch_path("artrace_export_rate");
+  std::filesystem::remove_all(dir);
+  const auto scene = box_scene(dir);
+  const auto rec = dir / "rec10";
+  {
+    const AffScene room = load_aff(kRoot / "data/scenes/room.aff");
+    SynthOptions o;
+    o.frames = 6;
+    o.width = 64;
+    o.height = 48;
+    o.fps = 10;
+    Synthesizer synth(room, o);
+    auto w = make_recording_writer(rec);
+    synth.write(*w);
+  }
+  const std::string base = std::string(ARTRACE_BINARY) + " export " + rec.string() + " --scene " + scene.string() + " -q";
+  auto rate = [](const std::filesystem::path& clip) { return cv::VideoCapture(clip.string()).get(cv::CAP_PROP_FPS); };
+  ASSERT_EQ(run(base + " -o " + (dir / "own.avi").string()), 0);
+  EXPECT_NEAR(rate(dir / "own.avi"), 10.0, 1e-6);
+  ASSERT_EQ(run(base + " --fps 25 -o " + (dir / "given.avi").string()), 0);
+  EXPECT_NEAR(rate(dir / "given.avi"), 25.0, 1e-6);
+  ASSERT_EQ(run(base + " --frames 0:3 -o " + (dir / "a").string()), 0);
+  ASSERT_EQ(run(base + " --frames 3:6 -o " + (dir / "b").string()), 0);
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " join " + (dir / "a").string() + " " + (dir / "b").string() + " -q -o " +
+                (dir / "joined.avi").string()),
+            0);
+  EXPECT_NEAR(rate(dir / "joined.avi"), 10.0, 1e-6);
+  std::filesystem::remove_all(dir);
+}
+
 /// A recording whose depth frames are of another size than its colour frames (an .oni recorded
 /// with QVGA depth and VGA colour) is refused by the AR commands, naming it and both sizes: the
 /// compositor reads each colour pixel's depth at the same pixel, and without it drew the models
