@@ -34,19 +34,6 @@ struct Options {
   ClipOptions clip{0.0};  ///< and the frame rate a shard records; 0: the recording's
 };
 
-/// A recording's frame rate: its frames over their time span, to a thousandth (30 for one frame).
-double recording_rate(ar::FrameSource& source, int64_t count) {
-  ar::SensorFrame a, b;
-  source.seek(0);
-  const bool first = count >= 2 && source.next(a);
-  if (first) source.seek(count - 1);
-  const bool last = first && source.next(b);
-  source.seek(0);
-  const double span = last ? b.color_time_s - a.color_time_s : 0.0;
-  if (!(span > 0.0)) return 30.0;
-  return std::clamp(std::round(1000.0 * static_cast<double>(count - 1) / span) / 1000.0, 1.0, 1000.0);
-}
-
 /// What makes a shard's frames besides their numbers: join refuses shards that differ in any.
 nlohmann::json settings(const Options& opt) {
   std::error_code ec;

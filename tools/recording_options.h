@@ -7,6 +7,8 @@
 #include "artrace/ar/depth_registration.h"
 #include "artrace/io/recording.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <functional>
 #include <memory>
@@ -56,6 +58,19 @@ inline ar::DepthShift resolve_depth_shift(const std::string& value, const std::f
   }
   std::sscanf(value.c_str(), "%d,%d", &s.dx, &s.dy);
   return s;
+}
+
+/// A recording's frame rate: its frames over their time span, to a thousandth (30 for one frame).
+inline double recording_rate(ar::FrameSource& source, int64_t count) {
+  ar::SensorFrame a, b;
+  source.seek(0);
+  const bool first = count >= 2 && source.next(a);
+  if (first) source.seek(count - 1);
+  const bool last = first && source.next(b);
+  source.seek(0);
+  const double span = last ? b.color_time_s - a.color_time_s : 0.0;
+  if (!(span > 0.0)) return 30.0;
+  return std::clamp(std::round(1000.0 * static_cast<double>(count - 1) / span) / 1000.0, 1.0, 1000.0);
 }
 
 /// Opens the recording and prints its warnings (defaults used, frames skipped) on stderr; with

@@ -310,7 +310,7 @@ TEST(Export, ModelsNeverInViewAreWarnedAbout) {
 
 /// A clip plays at its recording's rate unless --fps says otherwise: a 10 Hz recording gives a
 /// 10 frames/s clip, and its shards record 10 for join (before, every clip was 30 frames/s,
-/// playing a 10 Hz recording three times too fast).
+/// playing a 10 Hz recording three times too fast). A conversion to .oni records the same rate.
 TEST(Export, ClipsPlayAtTheRecordingsRate) {
   ARTRACE_REQUIRE_BINARY();
   const auto dir = ::artrace::test::scratch_path("artrace_export_rate");
@@ -340,6 +340,12 @@ TEST(Export, ClipsPlayAtTheRecordingsRate) {
                 (dir / "joined.avi").string()),
             0);
   EXPECT_NEAR(rate(dir / "joined.avi"), 10.0, 1e-6);
+  // and a conversion to .oni records the recording's rate in its streams
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " convert " + rec.string() + " -o " + (dir / "rec10.oni").string() + " > /dev/null"), 0);
+  ASSERT_EQ(run(std::string(ARTRACE_BINARY) + " info " + (dir / "rec10.oni").string() + " > " + (dir / "info.txt").string()), 0);
+  const std::string info = ::artrace::test::read_file(dir / "info.txt");
+  EXPECT_NE(info.find(R"("fps":10,)"), std::string::npos) << info;
+  EXPECT_EQ(info.find(R"("fps":30,)"), std::string::npos) << info;
   std::filesystem::remove_all(dir);
 }
 
