@@ -52,6 +52,7 @@ class ArSession {
       }
     }
     source_ = open_recording(recording, args.rec, quiet);
+    frame_span_ = frame_time_span(*source_);
     require_poses_in_time(args.rec.trajectory.empty() ? recording + "'s trajectory" : args.rec.trajectory);
     io::resolve_anchors(scene_file_, *source_);
     runtime_ = std::make_unique<io::ArRuntime>(scene_file_);
@@ -68,30 +69,9 @@ class ArSession {
     }
   }
 
-  /// Refuses a trajectory that covers none of the frames' times: its clock is not theirs, and every
-  /// frame would come out as recorded.
-  void require_poses_in_time(const std::string& trajectory) {
-    const auto span = source_->trajectory_span();
-    const int64_t count = source_->frame_count().value_or(0);
-    if (!span || count <= 0) return;
-    ar::SensorFrame first, last;
-    source_->seek(0);
-    if (!source_->next(first)) return;
-    source_->seek(count - 1);
-    if (!source_->next(last)) last = first;
-    source_->seek(0);
-    if (last.color_time_s >= span->first && first.color_time_s <= span->second) return;
-    auto seconds = [](double t) {
-      char s[40];
-      std::snprintf(s, sizeof s, "%.6f", t);
-      return std::string(s);
-    };
-    throw std::runtime_error(trajectory + ": its poses run from " + seconds(span->first) + " to " + seconds(span->second) + " s, the frames of " +
-                             recording_ + " from " + seconds(first.color_time_s) + " to " + seconds(last.color_time_s) +
-                             " s: no frame has a camera pose (are their times on different clocks?)");
-  }
-
   ar::FrameSource& source() { return *source_; }
+  /// The colour times of the recording's first and last frames (frame_time_span).
+  const std::optional<std::pair<double, double>>& frame_span() const { return frame_span_; }
   io::ArRuntime& runtime() { return *runtime_; }
   ar::CompositeOptions& options() { return options_; }
   const ar::FusedRoom* room() const { return room_.get(); }
@@ -145,12 +125,30 @@ class ArSession {
   }
 
  private:
+  /// Refuses a trajectory that covers none of the frames' times: its clock is not theirs, and every
+  /// frame would come out as recorded.
+  void require_poses_in_time(const std::string& trajectory) const {
+    const auto span = source_->trajectory_span();
+    if (!span || !frame_span_) return;
+    const auto [first, last] = *frame_span_;
+    if (last >= span->first && first <= span->second) return;
+    auto seconds = [](double t) {
+      char s[40];
+      std::snprintf(s, sizeof s, "%.6f", t);
+      return std::string(s);
+    };
+    throw std::runtime_error(trajectory + ": its poses run from " + seconds(span->first) + " to " + seconds(span->second) + " s, the frames of " +
+                             recording_ + " from " + seconds(first) + " to " + seconds(last) +
+                             " s: no frame has a camera pose (are their times on different clocks?)");
+  }
+
   std::string recording_;
   io::ArSceneFile scene_file_;
   std::unique_ptr<ar::FrameSource> source_;
   std::unique_ptr<io::ArRuntime> runtime_;
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
+  std::optional<std::pair<double, double>> frame_span_;
   int64_t frames_without_pose_ = 0, frames_posed_ = 0, frames_in_view_ = 0;
   bool warned_fixed_camera_ = false;
   ar::CompositeOptions options_;

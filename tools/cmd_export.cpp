@@ -68,7 +68,7 @@ void run(const Options& opt) {
   last = last >= 0 ? std::min<int64_t>(last, count - 1) : count - 1;
   if (first < 0 || first > last) throw std::invalid_argument("frame range " + std::to_string(first) + ".." + std::to_string(last) + " is empty");
   ClipOptions clip = opt.clip;
-  if (clip.fps <= 0.0) clip.fps = recording_rate(source, count);
+  if (clip.fps <= 0.0) clip.fps = recording_rate(count, session.frame_span());
   source.seek(first);
 
   const std::filesystem::path out(opt.output);

@@ -310,7 +310,7 @@ void add_recording_commands(CLI::App& app) {
       note_recording_output(*dst);
       check_outputs(recording_outputs(*dst), recording_inputs(*src, rec->intrinsics, rec->trajectory));
       auto in = open_recording(*src, *rec);
-      const int fps = static_cast<int>(std::lround(recording_rate(*in, in->frame_count().value_or(0))));
+      const int fps = static_cast<int>(std::lround(recording_rate(in->frame_count().value_or(0), frame_time_span(*in))));
       StoppableRecordingWriter out(io::make_recording_writer(*dst, fps), *dst);
       ar::SensorFrame f;
       int n = 0;

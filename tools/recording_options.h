@@ -12,7 +12,9 @@
 #include <cstdio>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <utility>
 
 namespace artrace::tools {
 
@@ -60,17 +62,25 @@ inline ar::DepthShift resolve_depth_shift(const std::string& value, const std::f
   return s;
 }
 
-/// A recording's frame rate: its frames over their time span, to a thousandth (30 for one frame).
-inline double recording_rate(ar::FrameSource& source, int64_t count) {
-  ar::SensorFrame a, b;
+/// The colour times of a recording's first and last frames (both read, then the source rewound);
+/// empty when it holds none or does not say how many.
+inline std::optional<std::pair<double, double>> frame_time_span(ar::FrameSource& source) {
+  const int64_t count = source.frame_count().value_or(0);
+  ar::SensorFrame first, last;
   source.seek(0);
-  const bool first = count >= 2 && source.next(a);
-  if (first) source.seek(count - 1);
-  const bool last = first && source.next(b);
+  if (count <= 0 || !source.next(first)) return std::nullopt;
+  source.seek(count - 1);
+  if (!source.next(last)) last = first;
   source.seek(0);
-  const double span = last ? b.color_time_s - a.color_time_s : 0.0;
-  if (!(span > 0.0)) return 30.0;
-  return std::clamp(std::round(1000.0 * static_cast<double>(count - 1) / span) / 1000.0, 1.0, 1000.0);
+  return std::make_pair(first.color_time_s, last.color_time_s);
+}
+
+/// A recording's frame rate from `count` frames over their time span, to a thousandth (30 for one
+/// frame, or none).
+inline double recording_rate(int64_t count, const std::optional<std::pair<double, double>>& span) {
+  const double seconds = span ? span->second - span->first : 0.0;
+  if (count < 2 || !(seconds > 0.0)) return 30.0;
+  return std::clamp(std::round(1000.0 * static_cast<double>(count - 1) / seconds) / 1000.0, 1.0, 1000.0);
 }
 
 /// Opens the recording and prints its warnings (defaults used, frames skipped) on stderr; with
