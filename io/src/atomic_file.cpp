@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -31,6 +32,22 @@ int write_checked(const std::filesystem::path& file, std::string_view bytes) {
     if (type == std::filesystem::file_type::regular || type == std::filesystem::file_type::symlink) std::filesystem::remove(file, ec);
   }
   return err;
+}
+
+/// The process's file mode creation mask, read without changing it (/proc/self/status), else by
+/// setting it and back.
+mode_t creation_mask() {
+  if (std::FILE* f = std::fopen("/proc/self/status", "r")) {
+    char line[256];
+    unsigned mask = 0;
+    bool found = false;
+    while (!found && std::fgets(line, sizeof line, f)) found = std::sscanf(line, "Umask: %o", &mask) == 1;
+    std::fclose(f);
+    if (found) return static_cast<mode_t>(mask);
+  }
+  const mode_t mask = ::umask(022);
+  ::umask(mask);
+  return mask;
 }
 
 /// Gives `made` the name `path` unless something has it: 0, or the errno (EEXIST when taken).
@@ -86,7 +103,9 @@ PartialOutput::PartialOutput(std::filesystem::path partial, Kind kind, std::stri
     } else {
       fd = mkostemp(made.data(), O_CLOEXEC);
     }
-    if (fd < 0 || flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    // mkstemp and mkdtemp make them the owner's alone; an output gets what open() and mkdir() give
+    const mode_t mode = (kind == Kind::folder ? 0777 : 0666) & ~creation_mask();
+    if (fd < 0 || ::fchmod(fd, mode) != 0 || flock(fd, LOCK_EX | LOCK_NB) != 0) {
       const int err = errno;
       std::error_code ec;
       std::filesystem::remove(made, ec);

@@ -11,6 +11,8 @@
 #include "../cli_util.h"
 #include "../test_util.h"
 
+#include <sys/stat.h>
+
 #include <fstream>
 #include <stdexcept>
 
@@ -123,9 +125,16 @@ TEST(AtomicFile, PartialOutputIsHeldByOneWriterAtATime) {
     const bool folder = kind == PartialOutput::Kind::folder;
     const auto partial = dir / (folder ? "frames.partial" : "clip.partial.mp4");
     {
+      const mode_t mask = ::umask(022);
       PartialOutput first(partial, kind, "OUT");
+      ::umask(mask);
       EXPECT_EQ(first.path(), partial);
       EXPECT_EQ(folder, std::filesystem::is_directory(partial));
+      // the permissions a file or folder made by open() or mkdir() would have (mkstemp's and
+      // mkdtemp's own are the owner's alone: an export's clip unreadable by anyone else)
+      struct stat st {};
+      ASSERT_EQ(::stat(partial.c_str(), &st), 0);
+      EXPECT_EQ(st.st_mode & 0777, folder ? 0755u : 0644u);
       if (folder) std::ofstream(partial / "frame_000000.png") << "written";
       else std::ofstream(partial) << "written";
       EXPECT_TRUE(throws_with([&] { PartialOutput second(partial, kind, "OUT"); },
