@@ -77,8 +77,7 @@ class ArSession {
   const ar::FusedRoom* room() const { return room_.get(); }
   /// Frames composite() gave back as recorded, for want of a pose.
   int64_t frames_without_pose() const { return frames_without_pose_; }
-  /// Frames composited with a camera, and those in which a virtual object's bounds came into view.
-  int64_t frames_posed() const { return frames_posed_; }
+  /// Frames composited with a camera in which a virtual object's bounds came into view.
   int64_t frames_in_view() const { return frames_in_view_; }
 
   /// The models moved to the frame's time, and the frame composited. `update_ms` (optional): the
@@ -119,7 +118,6 @@ class ArSession {
     ar::CompositeStats local;
     ar::CompositeStats& stats = st ? *st : local;
     ar::ColorImage out = ar::composite(f, rt.scene(), [&rt](const ar::SurfaceQuery& q) { return rt.material(q); }, options_, &stats);
-    ++frames_posed_;
     if (stats.traced_pixels > 0) ++frames_in_view_;
     return out;
   }
@@ -149,7 +147,7 @@ class ArSession {
   std::unique_ptr<ar::FusedRoom> room_;
   ar::DepthProxy proxy_;
   std::optional<std::pair<double, double>> frame_span_;
-  int64_t frames_without_pose_ = 0, frames_posed_ = 0, frames_in_view_ = 0;
+  int64_t frames_without_pose_ = 0, frames_in_view_ = 0;
   bool warned_fixed_camera_ = false;
   ar::CompositeOptions options_;
 };

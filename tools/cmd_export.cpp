@@ -163,11 +163,11 @@ void run(const Options& opt) {
     std::fprintf(stderr, "warning: %lld of %lld frames had no camera pose and are as recorded, without the virtual objects\n",
                  static_cast<long long>(session.frames_without_pose()), static_cast<long long>(total));
   }
-  if (session.frames_posed() > 0 && session.frames_in_view() == 0) {
+  if (const int64_t posed = total - session.frames_without_pose(); posed > 0 && session.frames_in_view() == 0) {
     std::fprintf(stderr,
                  "warning: no virtual object came into view in any of the %lld frames: check the models' positions against the "
                  "recording's world (artrace info REC --planes lists a frame's large surfaces in it)\n",
-                 static_cast<long long>(session.frames_posed()));
+                 static_cast<long long>(posed));
   }
 }
 

@@ -106,6 +106,19 @@ std::string image_header_error(const uint8_t* data, size_t size) {
   return "";
 }
 
+cv::Mat read_depth_png(const std::filesystem::path& path, const cv::Mat& bgr) {
+  const cv::Mat raw = read_image_file(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
+  if (raw.empty()) throw ParseError(path.string(), 0, 0, "cannot decode the depth image (missing, truncated or not an image)");
+  if (raw.type() != CV_16UC1) {
+    throw ParseError(path.string(), 0, 0, "depth PNG must be 16-bit with one channel, got OpenCV type " + std::to_string(raw.type()));
+  }
+  if (raw.cols != bgr.cols || raw.rows != bgr.rows) {
+    throw ParseError(path.string(), 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) + ", colour " +
+                                              std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
+  }
+  return raw;
+}
+
 cv::Mat read_image_file(const std::filesystem::path& path, int flags) {
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) return cv::Mat();

@@ -43,4 +43,8 @@ std::string image_header_error(const uint8_t* data, size_t size);
 /// file is missing or OpenCV cannot decode it; the caller says which image it was.
 cv::Mat read_image_file(const std::filesystem::path& path, int flags);
 
+/// A depth PNG read for the colour image `bgr` it pairs with: 16-bit, one channel, of the colour's
+/// size; else a ParseError naming the file and what is wrong (undecodable, its type, both sizes).
+cv::Mat read_depth_png(const std::filesystem::path& path, const cv::Mat& bgr);
+
 }  // namespace artrace::io

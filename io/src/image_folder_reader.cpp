@@ -149,13 +149,7 @@ bool ImageFolderReader::next(ar::SensorFrame& f) {
     if (bgr.empty()) throw ParseError(color_name, 0, 0, "cannot decode the colour image");
   }
   const std::string depth_name = depth_files_[static_cast<size_t>(cursor_)].string();
-  const cv::Mat raw = read_image_file(depth_name, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-  if (raw.empty()) throw ParseError(depth_name, 0, 0, "cannot decode the depth image");
-  if (raw.type() != CV_16UC1) throw ParseError(depth_name, 0, 0, "depth PNG must be 16-bit with one channel");
-  if (raw.cols != bgr.cols || raw.rows != bgr.rows) {
-    throw ParseError(depth_name, 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) + ", colour " +
-                                           std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
-  }
+  const cv::Mat raw = read_depth_png(depth_name, bgr);
   if (intrinsics_) check_intrinsics_size(*intrinsics_, bgr.cols, bgr.rows, intrinsics_source_, intrinsics_source_ == "given" ? "the intrinsics given are" : "is");
   f = ar::SensorFrame{};
   f.index = cursor_;

@@ -256,15 +256,7 @@ ar::SensorFrame TumReader::read(int64_t i) const {
   const std::filesystem::path cp = folder_ / e.color.file, dp = folder_ / e.depth.file;
   const cv::Mat bgr = read_image_file(cp, cv::IMREAD_COLOR);
   if (bgr.empty()) throw ParseError(cp.string(), 0, 0, "cannot decode the colour image (missing, truncated or not an image)");
-  const cv::Mat raw = read_image_file(dp, cv::IMREAD_ANYDEPTH | cv::IMREAD_ANYCOLOR);
-  if (raw.empty()) throw ParseError(dp.string(), 0, 0, "cannot decode the depth image (missing, truncated or not an image)");
-  if (raw.type() != CV_16UC1) {
-    throw ParseError(dp.string(), 0, 0, "depth PNG must be 16-bit with one channel, got OpenCV type " + std::to_string(raw.type()));
-  }
-  if (raw.cols != bgr.cols || raw.rows != bgr.rows) {
-    throw ParseError(dp.string(), 0, 0, "depth is " + std::to_string(raw.cols) + "x" + std::to_string(raw.rows) +
-                                            ", colour " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows));
-  }
+  const cv::Mat raw = read_depth_png(dp, bgr);
   f.color = color_from_bgr(bgr);
   f.depth = depth_from_u16(raw, options_.depth_scale);
   if (default_intrinsics_) {
